@@ -1,0 +1,242 @@
+"""Drive laws and kinematics (velocities, accelerations) by autodiff of the implicit root.
+
+With ``q = q*(u, p)`` the solved positions and a drive law ``u(t)``, the time
+derivatives are nested forward-mode derivatives of ``t -> q*(u(t), p)``:
+
+    q_dot  = q' u_dot,      q_ddot = q' u_ddot + q''[u_dot, u_dot],
+
+with ``q' = dq/du`` and ``q'' = d2q/du2`` given by the implicit function theorem
+(``solve.implicit_root``).  Nothing is differentiated through Newton iterations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable, Mapping, Sequence
+
+import jax
+import jax.numpy as jnp
+
+from .mechanism import Mechanism
+from .solve import Solution, SolverOptions, _as_inputs, implicit_root, solve_stroke
+from .status import Status
+
+__all__ = [
+    "ConstantSpeed",
+    "Ramp",
+    "SmoothStart",
+    "Motion",
+    "input_derivatives",
+    "time_derivatives",
+    "motion",
+    "stroke_kinematics",
+]
+
+
+# --------------------------------------------------------------------------- drive laws
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ConstantSpeed:
+    """``u(t) = u0 + w t`` (u0 in rad or m, w in rad/s or m/s)."""
+
+    u0: jax.Array
+    w: jax.Array
+
+    def __call__(self, t):
+        return self.u0 + self.w * t
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Ramp:
+    """``u = u0`` before ``t0``, then ``u0 + w (t - t0)``: a velocity step at ``t0``, as a
+    multibody code's ramp drive (its acceleration is an impulse that the smooth law avoids)."""
+
+    u0: jax.Array
+    w: jax.Array
+    t0: jax.Array = 0.0
+
+    def __call__(self, t):
+        return self.u0 + self.w * jnp.maximum(t - self.t0, 0.0)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SmoothStart:
+    """The flap report's smooth start: ``u = u0 + w ((t - t0) + (exp(-k (t - t0)) - 1) / k)``.
+
+    Zero speed at ``t0``, speed ``w (1 - exp(-k (t - t0)))`` tending to ``w``; ``u = u0``
+    before ``t0``.  ``k`` (1/s) sets how fast the nominal speed is reached.
+    """
+
+    u0: jax.Array
+    w: jax.Array
+    k: jax.Array
+    t0: jax.Array = 0.0
+
+    def __call__(self, t):
+        tau = jnp.maximum(t - self.t0, 0.0)
+        return self.u0 + self.w * (tau + jnp.expm1(-self.k * tau) / self.k)
+
+
+# --------------------------------------------------------------------------- derivatives
+def _root_fn(mech: Mechanism, sol_q, ok, p):
+    """``u -> q*(u, p)`` around a solved sample (values fixed, derivatives implicit)."""
+    return lambda u: implicit_root(mech, sol_q, ok, u, p)
+
+
+def input_derivatives(mech: Mechanism, q, u, p):
+    """``dq/du`` and ``d2q/du2`` at one solved sample.
+
+    Shapes ``(m, dof)`` and ``(m, dof, dof)``; units rad (or m) per unit input.  Samples
+    with NaN positions give zeros (mask them by status).
+    """
+    ok = jnp.all(jnp.isfinite(q))
+    f = _root_fn(mech, q, ok, p)
+    d1 = jax.jacfwd(f)(u)
+    d2 = jax.jacfwd(jax.jacfwd(f))(u)
+    return d1, d2
+
+
+def time_derivatives(fn: Callable, t):
+    """``(x, x_dot, x_ddot)`` of any ``fn(t)`` by nested forward mode (one sample)."""
+
+    def first(t_):
+        return jax.jvp(fn, (t_,), (jnp.ones_like(t_),))
+
+    (x, xd), (_, xdd) = jax.jvp(first, (t,), (jnp.ones_like(t),))
+    return x, xd, xdd
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Motion:
+    """Kinematics along a drive (a pytree; leading axis = time samples).
+
+    - `t` (s), `u`, `u_dot`, `u_ddot`: the drive, ``(N, dof)``.
+    - `q`, `q_dot`, `q_ddot`: coordinates and their time derivatives, ``(N, m)``.
+    - `dq_du`, `d2q_du2`: per-unit-input derivatives, ``(N, m, dof)``, ``(N, m, dof, dof)``.
+    - `points`: ``{name: (pos, vel, acc)}`` complex ``x + i y`` in m, m/s, m/s^2.
+    - `status`: ``(N,)`` ``Status`` codes; failed samples are NaN in every field.
+    """
+
+    t: jax.Array
+    u: jax.Array
+    u_dot: jax.Array
+    u_ddot: jax.Array
+    q: jax.Array
+    q_dot: jax.Array
+    q_ddot: jax.Array
+    dq_du: jax.Array
+    d2q_du2: jax.Array
+    points: dict
+    status: jax.Array
+    coords: tuple = dataclasses.field(metadata=dict(static=True), default=())
+    inputs: tuple = dataclasses.field(metadata=dict(static=True), default=())
+
+    def __getitem__(self, name: str):
+        """Coordinate or input by name (positions)."""
+        if name in self.coords:
+            return self.q[..., self.coords.index(name)]
+        if name in self.inputs:
+            return self.u[..., self.inputs.index(name)]
+        raise KeyError(f"unknown name {name!r}; coordinates {self.coords}, inputs {self.inputs}")
+
+
+def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q):
+    ok = jnp.all(jnp.isfinite(q))
+    root = _root_fn(mech, q, ok, p)
+
+    def u_of_t(t_):
+        return jnp.reshape(drive(t_), (mech.dof,))
+
+    u, ud, udd = time_derivatives(u_of_t, t)
+    _, qd, qdd = time_derivatives(lambda t_: root(u_of_t(t_)), t)
+    d1, d2 = input_derivatives(mech, q, u, p)
+    pts = {}
+    for name in point_names:
+        pts[name] = time_derivatives(lambda t_: mech.point(name, root(u_of_t(t_)), u_of_t(t_), p), t)
+    nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
+    return (u, ud, udd, q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _motion_eval_leaves(mech, point_names, drive_def, drive_leaves, p, t, q):
+    drive = jax.tree_util.tree_unflatten(drive_def, drive_leaves)
+    return jax.vmap(lambda t_, q_: _one_sample(mech, point_names, drive, p, t_, q_))(t, q)
+
+
+def _motion_eval(mech, point_names, drive, p, t, q):
+    # A drive that is a pytree of arrays is traced (one compile for every speed); a plain
+    # function is static (it is hashable), so it recompiles only when the function changes.
+    leaves, treedef = jax.tree_util.tree_flatten(drive)
+    if all(isinstance(x, (jax.Array, float, int)) or hasattr(x, "dtype") for x in leaves) and leaves:
+        return _motion_eval_leaves(mech, point_names, treedef, [jnp.asarray(x, t.dtype) for x in leaves], p, t, q)
+    return _motion_eval_static(mech, point_names, drive, p, t, q)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _motion_eval_static(mech, point_names, drive, p, t, q):
+    return jax.vmap(lambda t_, q_: _one_sample(mech, point_names, drive, p, t_, q_))(t, q)
+
+
+def motion(
+    mech: Mechanism,
+    drive: Callable,
+    t,
+    p: Mapping,
+    guess,
+    *,
+    points: Sequence[str] | None = None,
+    options: SolverOptions = SolverOptions(),
+    anchors: int = 256,
+) -> Motion:
+    """Positions, velocities and accelerations along a drive law ``u(t)`` (one design).
+
+    **Arguments**
+
+    - `drive`: any differentiable ``u(t)`` (a pytree such as ``SmoothStart`` or a plain
+      function); scalar for one input or ``(dof,)``.
+    - `t`: ``(N,)`` times (s), in order: positions are solved by continuation along them.
+    - `p`: parameters; `guess`: coordinates at ``t[0]`` (picks the branch).
+    - `points`: names of ``mech.points`` to differentiate too (default: all).
+
+    **Returns** a ``Motion``.
+    """
+    t = jnp.asarray(t)
+    if t.ndim != 1:
+        raise ValueError(f"{mech.name}: t must be a 1-D array of times, got shape {t.shape}")
+    point_names = tuple(mech.points) if points is None else tuple(points)
+    for n in point_names:
+        if n not in mech.points:
+            raise ValueError(f"{mech.name}: unknown point {n!r}; defined points: {list(mech.points)}")
+    us = jax.vmap(drive)(t)
+    sol: Solution = solve_stroke(mech, us, p, guess, options=options, anchors=anchors)
+    pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
+    u, ud, udd, q, qd, qdd, d1, d2, pts = _motion_eval(mech, point_names, drive, pj, t.astype(sol.q.dtype), sol.q)
+    return Motion(
+        t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
+        points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,
+    )
+
+
+def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
+    """Positions and per-unit-input derivatives over a stroke ``us`` (one design).
+
+    **Returns** ``(solution, dq_du (N, m, dof), d2q_du2 (N, m, dof, dof))``; NaN where the
+    status is not ``CONVERGED``.
+    """
+    sol = solve_stroke(mech, us, p, guess, options=options, anchors=anchors)
+    u = _as_inputs(mech, jnp.asarray(us, sol.q.dtype), "us")
+    pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
+    d1, d2 = _derivs_batch(mech, sol.q, u, pj)
+    ok = (sol.status == Status.CONVERGED)
+    d1 = jnp.where(ok[:, None, None], d1, jnp.nan)
+    d2 = jnp.where(ok[:, None, None, None], d2, jnp.nan)
+    return sol, d1, d2
+
+
+@functools.partial(jax.jit, static_argnums=(0,))
+def _derivs_batch(mech, q, u, p):
+    return jax.vmap(lambda q_, u_: input_derivatives(mech, q_, u_, p))(q, u)

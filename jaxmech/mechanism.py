@@ -1,0 +1,257 @@
+"""A planar mechanism as named coordinates, parameters and loop-closure equations.
+
+A mechanism is nothing more than
+
+* ``coords``: the dependent coordinates ``q`` (joint angles, slider travels),
+* ``inputs``: the driven coordinates ``u``, one per degree of freedom,
+* ``params``: the named parameters ``p`` (lengths, masses, coefficients),
+* ``constraints(q, u, p)``: the loop-closure equations, written the way the
+  engineering reports write them.  Each entry of the returned sequence is either
+  a *complex* vector loop ``sum_k l_k e^{i theta_k} = 0`` (two real equations:
+  real and imaginary part) or a *real* scalar equation (a pin on a circular slot,
+  a point on a line).
+
+``q``, ``u`` and ``p`` arrive as namespaces, so equations read like the paper::
+
+    fourbar = Mechanism(
+        coords=("theta3", "theta4"),
+        inputs=("theta2",),
+        params=("a", "b", "c", "d"),
+        constraints=lambda q, u, p: [
+            p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d
+        ],
+    )
+
+Units: SI throughout.  Which coordinates and parameters are lengths is declared
+(``lengths``) so that tolerances scale with the design (millimetres and metres
+give the same angles and statuses) and so that a negative length is caught early.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["Mechanism", "cis", "Vars"]
+
+
+def cis(angle):
+    """``e^{i angle}`` as a complex number: the unit vector at ``angle`` (rad, CCW from +x)."""
+    return jax.lax.complex(jnp.cos(angle), jnp.sin(angle))
+
+
+class Vars(Mapping):
+    """Read-only name -> value view, with attribute access (``q.theta3``).
+
+    Used to hand coordinates, inputs and parameters to user equations by name.
+    """
+
+    __slots__ = ("_data",)
+
+    def __init__(self, data: Mapping[str, Any]):
+        object.__setattr__(self, "_data", dict(data))
+
+    def __getattr__(self, name):
+        try:
+            return self._data[name]
+        except KeyError:
+            known = ", ".join(self._data) or "(none)"
+            raise AttributeError(f"unknown name {name!r}; known names: {known}") from None
+
+    def __getitem__(self, name):
+        return self._data[name]
+
+    def __iter__(self):
+        return iter(self._data)
+
+    def __len__(self):
+        return len(self._data)
+
+    def __repr__(self):
+        return f"Vars({self._data!r})"
+
+
+def _names(value, what: str) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = (value,)
+    names = tuple(value)
+    for n in names:
+        if not isinstance(n, str) or not n.isidentifier():
+            raise ValueError(f"{what}: {n!r} is not a valid name (use Python identifiers)")
+    if len(set(names)) != len(names):
+        raise ValueError(f"{what}: duplicate names in {names}")
+    return names
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Mechanism:
+    """Static description of a planar mechanism (hashable by identity, safe as a jit static).
+
+    **Arguments**
+
+    - `coords`: names of the dependent coordinates ``q`` (``m`` of them).
+    - `inputs`: names of the driven coordinates ``u`` (one per degree of freedom).
+    - `params`: names of every parameter the scene uses (kinematic and physical).
+    - `constraints`: ``fn(q, u, p) -> sequence`` of complex loops and real scalars;
+      must give exactly ``m`` real equations.
+    - `lengths`: names (of coords, inputs or params) measured in metres.  Defaults to
+      every parameter.  Their magnitude sets the residual scale.
+    - `signed`: length parameters that may be zero or negative (offsets).  Every other
+      length parameter must be positive and finite.
+    - `points`: optional ``{name: fn(q, u, p) -> complex}`` points of interest (m).
+    - `branch`: optional ``fn(q, u, p) -> real`` whose sign identifies the assembly mode
+      (for example a cross product).  A solve reports when the sign changed.
+    - `name`: for messages.
+    """
+
+    coords: Sequence[str]
+    inputs: Sequence[str]
+    params: Sequence[str]
+    constraints: Callable
+    lengths: Sequence[str] | None = None
+    signed: Sequence[str] = ()
+    points: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
+    branch: Callable | None = None
+    name: str = "mechanism"
+
+    def __post_init__(self):
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        set_("coords", _names(self.coords, "coords"))
+        set_("inputs", _names(self.inputs, "inputs"))
+        set_("params", _names(self.params, "params"))
+        every = self.coords + self.inputs + self.params
+        if len(set(every)) != len(every):
+            raise ValueError("coords, inputs and params must not share a name")
+        if not self.coords:
+            raise ValueError("coords: a mechanism needs at least one dependent coordinate")
+        lengths = self.params if self.lengths is None else _names(self.lengths, "lengths")
+        for n in lengths:
+            if n not in every:
+                raise ValueError(f"lengths: {n!r} is not a coordinate, input or parameter")
+        set_("lengths", tuple(lengths))
+        signed = _names(self.signed, "signed")
+        for n in signed:
+            if n not in self.params:
+                raise ValueError(f"signed: {n!r} is not a parameter")
+        set_("signed", signed)
+        set_("points", dict(self.points))
+        if not callable(self.constraints):
+            raise ValueError("constraints must be a function fn(q, u, p) -> sequence of equations")
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def m(self) -> int:
+        """Number of dependent coordinates (and of scalar equations)."""
+        return len(self.coords)
+
+    @property
+    def dof(self) -> int:
+        """Number of driven inputs (degrees of freedom)."""
+        return len(self.inputs)
+
+    def coord_is_length(self) -> np.ndarray:
+        """Boolean mask over ``coords``: which dependent coordinates are lengths."""
+        return np.array([n in self.lengths for n in self.coords])
+
+    def input_is_length(self) -> np.ndarray:
+        """Boolean mask over ``inputs``: which driven coordinates are lengths."""
+        return np.array([n in self.inputs and n in self.lengths for n in self.inputs])
+
+    # ------------------------------------------------------------------ evaluation
+    def vars_q(self, q) -> Vars:
+        return Vars({n: q[..., i] for i, n in enumerate(self.coords)})
+
+    def vars_u(self, u) -> Vars:
+        return Vars({n: u[..., i] for i, n in enumerate(self.inputs)})
+
+    def vars_p(self, p: Mapping) -> Vars:
+        return p if isinstance(p, Vars) else Vars(p)
+
+    def residual(self, q, u, p):
+        """``Phi(q, u, p)``: the constraint residuals as a real vector of length ``m`` (m or -).
+
+        Complex loops contribute (real, imaginary); real equations contribute one entry.
+        """
+        eqs = self.constraints(self.vars_q(q), self.vars_u(u), self.vars_p(p))
+        if not isinstance(eqs, (list, tuple)):
+            eqs = [eqs]
+        parts = []
+        for e in eqs:
+            e = jnp.asarray(e)
+            if jnp.iscomplexobj(e):
+                parts += [jnp.real(e), jnp.imag(e)]
+            else:
+                parts.append(e)
+        r = jnp.stack([jnp.reshape(x, ()) for x in parts])
+        if r.shape[0] != self.m:
+            raise ValueError(
+                f"{self.name}: constraints give {r.shape[0]} real equations for "
+                f"{self.m} coordinates {self.coords}; a complex loop counts twice"
+            )
+        return r
+
+    def point(self, name: str, q, u, p):
+        """Position of a named point as a complex number ``x + i y`` (m)."""
+        try:
+            fn = self.points[name]
+        except KeyError:
+            raise ValueError(
+                f"{self.name}: unknown point {name!r}; defined points: {', '.join(self.points) or '(none)'}"
+            ) from None
+        return jnp.asarray(fn(self.vars_q(q), self.vars_u(u), self.vars_p(p)))
+
+    def branch_value(self, q, u, p):
+        """The branch indicator (its sign names the assembly mode), or NaN if none is defined."""
+        if self.branch is None:
+            return jnp.asarray(jnp.nan, dtype=jnp.result_type(q))
+        return jnp.asarray(self.branch(self.vars_q(q), self.vars_u(u), self.vars_p(p)))
+
+    def length_scale(self, p: Mapping):
+        """Characteristic length of a design (m): the largest magnitude among length parameters.
+
+        Residual tolerances are relative to it, which makes statuses independent of units.
+        """
+        vals = [jnp.abs(jnp.asarray(p[n])) for n in self.lengths if n in self.params]
+        if not vals:
+            return jnp.asarray(1.0)
+        scale = vals[0]
+        for v in vals[1:]:
+            scale = jnp.maximum(scale, v)
+        return jnp.where(scale > 0, scale, 1.0)
+
+    # ------------------------------------------------------------------ checking
+    def check_params(self, p: Mapping) -> None:
+        """Eager checks of a parameter mapping; raises ``ValueError`` naming the parameter.
+
+        Checks names (no missing, no unknown) always, and values (finite; positive
+        lengths) where they are concrete numbers rather than traced values.
+        """
+        if not isinstance(p, Mapping):
+            raise ValueError(f"{self.name}: parameters must be a mapping name -> value, got {type(p).__name__}")
+        missing = [n for n in self.params if n not in p]
+        unknown = [n for n in p if n not in self.params]
+        if unknown:
+            raise ValueError(
+                f"{self.name}: unknown parameter(s) {unknown}; this mechanism's parameters are {list(self.params)}"
+            )
+        if missing:
+            raise ValueError(f"{self.name}: missing parameter(s) {missing}")
+        for n in self.params:
+            v = p[n]
+            if isinstance(v, jax.core.Tracer):
+                continue
+            arr = np.asarray(v)
+            if not np.issubdtype(arr.dtype, np.number):
+                raise ValueError(f"{self.name}: parameter {n!r} must be a number, got {arr.dtype}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{self.name}: parameter {n!r} must be finite, got {v!r}")
+            if n in self.lengths and n not in self.signed and np.any(arr <= 0):
+                raise ValueError(
+                    f"{self.name}: length {n!r} must be positive, got {v!r}; "
+                    f"give a positive length in metres"
+                )

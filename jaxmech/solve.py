@@ -1,0 +1,490 @@
+"""Position solve: damped Newton on the loop-closure equations, with implicit derivatives.
+
+Every function here works on one sample; batching is ``jax.vmap`` (the public
+``solve``/``solve_stroke`` broadcast for the user).
+
+Derivatives never go through the Newton iterations.  The converged root ``q*`` is
+attached to ``(u, p)`` by a custom JVP that implements the implicit function theorem:
+differentiating ``Phi(q*(u, p), u, p) = 0`` gives
+
+    Phi_q dq + Phi_u du + Phi_p dp = 0   =>   dq = -Phi_q^{-1} (Phi_u du + Phi_p dp).
+
+The rule is written in JAX primitives evaluated at the attached (differentiable) root,
+so forward mode, reverse mode (by transposition of the linear solve) and every higher
+order follow.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Mapping
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .mechanism import Mechanism
+from .status import Status
+
+__all__ = ["SolverOptions", "Solution", "solve", "solve_stroke", "solve_one", "implicit_root"]
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """Static solver settings (hashable; part of the compiled function's identity).
+
+    - `max_steps`: Newton/Levenberg-Marquardt iteration budget per sample.
+    - `xtol`: converged when the next scaled Newton step is below this (rad, or
+      multiples of the design's length scale).  Default ``eps**(2/3)`` of the dtype.
+    - `ftol`: converged residual, relative to the design's length scale.  Default
+      ``1024 eps``.
+    - `cond_max`: a converged sample whose scaled Jacobian condition number exceeds
+      this is reported ``SINGULAR``.  Default ``eps**-0.5``.
+    - `max_step`: largest scaled step per iteration (rad, or length scales); keeps far-off
+      guesses from jumping across assembly branches.
+    - `patience`: iterations with less than 10% residual decrease before a sample is
+      declared stalled (``INFEASIBLE``).
+    - `dtype`: require this floating dtype (``"float64"`` raises if x64 is off or an
+      argument is float32); ``None`` follows the arguments.
+    """
+
+    max_steps: int = 40
+    xtol: float | None = None
+    ftol: float | None = None
+    cond_max: float | None = None
+    max_step: float = 1.0
+    patience: int = 8
+    dtype: str | None = None
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Solution:
+    """Result of a position solve (a pytree; every array field has the batch shape in front).
+
+    - `q`: dependent coordinates, ``(..., m)``; NaN where the status is not ``CONVERGED``.
+    - `status`: ``(...)`` int32 ``Status`` codes.
+    - `steps`: iterations used.
+    - `residual`: final ``|Phi|_2`` divided by the design's length scale (dimensionless).
+    - `cond`: 1-norm condition number of the scaled constraint Jacobian ``Phi_q``.
+    - `branch`: the mechanism's branch indicator at the solution (NaN if none defined).
+    - `coords`: coordinate names (static).
+    """
+
+    q: jax.Array
+    status: jax.Array
+    steps: jax.Array
+    residual: jax.Array
+    cond: jax.Array
+    branch: jax.Array
+    coords: tuple = dataclasses.field(metadata=dict(static=True), default=())
+
+    def __getitem__(self, name: str):
+        """Coordinate by name: ``sol["theta3"]``."""
+        try:
+            return self.q[..., self.coords.index(name)]
+        except ValueError:
+            raise KeyError(f"unknown coordinate {name!r}; coordinates: {self.coords}") from None
+
+    @property
+    def ok(self):
+        """Boolean mask of converged samples."""
+        return self.status == Status.CONVERGED
+
+
+# --------------------------------------------------------------------------- small linear algebra
+def _solve_small(a, b):
+    """Solve ``a x = b`` for one small dense system; explicit for 1x1 and 2x2 (fast under vmap)."""
+    n = a.shape[-1]
+    if n == 1:
+        return b / a[0, 0]
+    if n == 2:
+        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+        x0 = (a[1, 1] * b[0] - a[0, 1] * b[1]) / det
+        x1 = (a[0, 0] * b[1] - a[1, 0] * b[0]) / det
+        return jnp.stack([x0, x1])
+    return jnp.linalg.solve(a, b)
+
+
+def _inv_small(a):
+    n = a.shape[-1]
+    if n <= 2:
+        return jax.vmap(lambda e: _solve_small(a, e), out_axes=1)(jnp.eye(n, dtype=a.dtype))
+    return jnp.linalg.inv(a)
+
+
+def _cond1(a):
+    """1-norm condition number of a small square matrix (inf where singular)."""
+    norm1 = lambda m: jnp.max(jnp.sum(jnp.abs(m), axis=0))  # noqa: E731
+    c = norm1(a) * norm1(_inv_small(a))
+    return jnp.where(jnp.isfinite(c), c, jnp.inf)
+
+
+# --------------------------------------------------------------------------- tolerances
+def _tolerances(opts: SolverOptions, dtype):
+    eps = float(jnp.finfo(dtype).eps)
+    xtol = opts.xtol if opts.xtol is not None else eps ** (2.0 / 3.0)
+    ftol = opts.ftol if opts.ftol is not None else 1024.0 * eps
+    cond_max = opts.cond_max if opts.cond_max is not None else eps**-0.5
+    return xtol, ftol, cond_max
+
+
+def _all_finite(tree) -> jax.Array:
+    leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
+
+
+# --------------------------------------------------------------------------- Newton (no gradients)
+def _newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
+    """Damped Newton / Levenberg-Marquardt for one sample.  Returns raw (q, status, ...).
+
+    Work is in scaled variables: ``z = q / s`` with ``s`` = 1 for angles and the design's
+    length scale ``L`` for lengths, residual ``Phi / L``.  A full Newton step is tried
+    first; when it does not lower ``|Phi|`` the step is regularised (LM parameter ``mu``),
+    which makes far-off guesses safe without costing the quadratic convergence near a root.
+    """
+    dtype = guess.dtype
+    xtol, ftol, cond_max = _tolerances(opts, dtype)
+    L = mech.length_scale(p).astype(dtype)
+    s = jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+    m = mech.m
+    eye = jnp.eye(m, dtype=dtype)
+
+    def evaluate(q):
+        def f(q_):
+            r = mech.residual(q_, u, p) / L
+            return r, r
+
+        j, r = jax.jacfwd(f, has_aux=True)(q)
+        return r, j * s[None, :]  # scaled residual and Jacobian d(Phi/L)/dz
+
+    def step(r, js, mu):
+        newton = _solve_small(js, r)
+        jtj = js.T @ js
+        lm = _solve_small(jtj + mu * (jnp.diag(jnp.diag(jtj)) + 1e-12 * eye), js.T @ r)
+        dz = jnp.where(mu > 0, lm, newton)
+        dz = jnp.where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
+        size = jnp.max(jnp.abs(dz))
+        # Cap the step: far from a root a Newton step can leap onto another branch.
+        return dz * jnp.minimum(1.0, opts.max_step / jnp.maximum(size, 1e-300)), size
+
+    inputs_ok = _all_finite((u, p, guess))
+    r0, j0 = evaluate(guess)
+    rn0 = jnp.linalg.norm(r0)
+    mu0 = jnp.zeros((), dtype)
+    dz0, size0 = step(r0, j0, mu0)
+    conv0 = (size0 <= xtol) & (rn0 <= ftol)
+
+    # state: k, q, r, rn, js, dz, size, mu, slow, done, stalled
+    state = (0, guess, r0, rn0, j0, dz0, size0, mu0, 0, conv0 | ~inputs_ok | ~jnp.isfinite(rn0), False)
+
+    def cond_fn(st):
+        k, *_, done, _stalled = st
+        return (~done) & (k < opts.max_steps)
+
+    def body(st):
+        k, q, r, rn, js, dz, size, mu, slow, done, stalled = st
+        qt = q - dz * s
+        rt, jt = evaluate(qt)
+        rtn = jnp.linalg.norm(rt)
+        accept = jnp.isfinite(rtn) & ((rtn < rn) | (rtn <= ftol))
+        q, r, rn, js = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), (qt, rt, rtn, jt), (q, r, rn, js))
+        jtj_scale = jnp.max(jnp.diag(js.T @ js))
+        mu = jnp.where(accept, jnp.where(mu > 1e-6, mu / 10.0, 0.0), jnp.maximum(10.0 * mu, 1e-3))
+        slow = jnp.where(accept & (rtn < 0.9 * st[3]), 0, slow + 1)
+        dz, size = step(r, js, mu)
+        converged = (size <= xtol) & (rn <= ftol)
+        stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(jtj_scale, 1.0))
+        # A closed loop with a singular Jacobian will never meet xtol: stop and report it.
+        singular_closed = (rn <= ftol) & (_cond1(js) > cond_max)
+        done = converged | stalled | singular_closed | ~jnp.isfinite(rn)
+        return (k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled)
+
+    k, q, r, rn, js, dz, size, mu, slow, done, stalled = jax.lax.while_loop(cond_fn, body, state)
+
+    converged = (size <= xtol) & (rn <= ftol)
+    q = jnp.where(converged, q - dz * s, q)  # the last Newton step is free: it was computed already
+    cond = _cond1(js)
+    finite = inputs_ok & jnp.isfinite(rn) & jnp.all(jnp.isfinite(q))
+    closed = rn <= ftol
+    status = jnp.where(
+        ~finite,
+        Status.NONFINITE,
+        jnp.where(
+            closed & (cond > cond_max),
+            Status.SINGULAR,
+            jnp.where(converged, Status.CONVERGED, jnp.where(stalled, Status.INFEASIBLE, Status.MAX_STEPS)),
+        ),
+    ).astype(jnp.int32)
+    if mech.branch is not None:
+        b_guess = mech.branch_value(guess, u, p)
+        b_sol = mech.branch_value(q, u, p)
+        flipped = (jnp.sign(b_guess) != jnp.sign(b_sol)) & (b_guess != 0)
+        status = jnp.where((status == Status.CONVERGED) & flipped, Status.BRANCH, status).astype(jnp.int32)
+        branch = b_sol
+    else:
+        branch = jnp.asarray(jnp.nan, dtype)
+    return q, status, k, rn, cond, branch
+
+
+# --------------------------------------------------------------------------- implicit derivatives
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def implicit_root(mech: Mechanism, q_star, ok, u, p):
+    """Attach a converged root ``q*`` to ``(u, p)`` for differentiation (identity on values).
+
+    Tangent: ``dq = -Phi_q^{-1} (Phi_u du + Phi_p dp)`` (implicit function theorem).  Where
+    ``ok`` is False the tangent is exactly zero and every intermediate is finite, so a
+    failed sample never puts NaN into a batch gradient.
+    """
+    return q_star
+
+
+@implicit_root.defjvp
+def _implicit_root_jvp(mech, primals, tangents):
+    q_star, ok, u, p = primals
+    _, _, du, dp = tangents
+    q = implicit_root(mech, q_star, ok, u, p)  # differentiable again: second order follows
+    # Evaluate the rule at a safe point where the sample failed (its NaNs would leak through
+    # 0 * NaN in the transposed, reverse-mode, computation).
+    q_s = jnp.where(ok, q, jnp.zeros_like(q))
+    u_s = jnp.where(ok, u, jnp.zeros_like(u))
+    p_s = jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.ones_like(x)), p)
+    du = jnp.where(ok, du, jnp.zeros_like(du))
+    dp = jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.zeros_like(x)), dp)
+    _, rhs = jax.jvp(lambda u_, p_: mech.residual(q_s, u_, p_), (u_s, p_s), (du, dp))
+    jac = jax.jacfwd(mech.residual)(q_s, u_s, p_s)
+    jac = jnp.where(ok, jac, jnp.eye(mech.m, dtype=jac.dtype))
+    dq = -_solve_small(jac, rhs)
+    return q, jnp.where(ok, dq, jnp.zeros_like(dq))
+
+
+def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptions()) -> Solution:
+    """Solve ``Phi(q, u, p) = 0`` for one sample, differentiable in ``u`` and ``p``.
+
+    `u`: ``(dof,)``; `p`: mapping of scalars; `guess`: ``(m,)``, which selects the branch.
+    Returns a ``Solution`` with scalar status.  No checks: use ``solve`` from user code.
+    """
+    stop = jax.lax.stop_gradient
+    q_raw, status, steps, rn, cond, branch = _newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
+    ok = status == Status.CONVERGED
+    q_star = jnp.where(ok, q_raw, jnp.nan)
+    q = implicit_root(mech, q_star, ok, u, p)
+    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, coords=mech.coords)
+
+
+# --------------------------------------------------------------------------- user-facing batching
+def _as_inputs(mech: Mechanism, u, what="u"):
+    """Inputs as an array ``(..., dof)``.  A dict maps input names to arrays; for one-input
+    mechanisms a bare array is the batch of that input."""
+    if isinstance(u, Mapping):
+        unknown = [k for k in u if k not in mech.inputs]
+        if unknown:
+            raise ValueError(f"{mech.name}: unknown input name(s) {unknown} in {what}; inputs are {list(mech.inputs)}")
+        missing = [k for k in mech.inputs if k not in u]
+        if missing:
+            raise ValueError(f"{mech.name}: missing input(s) {missing} in {what}")
+        arrs = jnp.broadcast_arrays(*[jnp.asarray(u[k]) for k in mech.inputs])
+        return jnp.stack(arrs, axis=-1)
+    u = jnp.asarray(u)
+    if mech.dof == 1:
+        return u[..., None]
+    if u.ndim == 0 or u.shape[-1] != mech.dof:
+        raise ValueError(f"{mech.name}: {what} must have a last axis of size {mech.dof} (inputs {mech.inputs}), got shape {u.shape}")
+    return u
+
+
+def _as_coords(mech: Mechanism, q, what="guess"):
+    if isinstance(q, Mapping):
+        unknown = [k for k in q if k not in mech.coords]
+        if unknown:
+            raise ValueError(f"{mech.name}: unknown coordinate name(s) {unknown} in {what}; coordinates are {list(mech.coords)}")
+        missing = [k for k in mech.coords if k not in q]
+        if missing:
+            raise ValueError(f"{mech.name}: missing coordinate(s) {missing} in {what}")
+        arrs = jnp.broadcast_arrays(*[jnp.asarray(q[k]) for k in mech.coords])
+        return jnp.stack(arrs, axis=-1)
+    q = jnp.asarray(q)
+    if q.ndim == 0 or q.shape[-1] != mech.m:
+        raise ValueError(f"{mech.name}: {what} must have a last axis of size {mech.m} (coordinates {mech.coords}), got shape {q.shape}")
+    return q
+
+
+def _check_dtype(options: SolverOptions, named: dict[str, Any]):
+    if options.dtype is None:
+        return
+    want = jnp.dtype(options.dtype)
+    if want == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError(
+            "dtype='float64' was asked for but JAX runs in float32: call "
+            "jax.config.update('jax_enable_x64', True) before creating arrays"
+        )
+    for name, x in named.items():
+        for leaf in jax.tree_util.tree_leaves(x):
+            dt = np.asarray(leaf).dtype if not isinstance(leaf, jax.Array) else leaf.dtype
+            if jnp.issubdtype(dt, jnp.floating) and dt != want:
+                raise ValueError(f"{name} is {dt} but dtype={want} was asked for; convert it with .astype({want.name!r})")
+
+
+def _prepare(mech: Mechanism, u, p, guess, options: SolverOptions, u_what="u"):
+    mech.check_params(p)
+    _check_dtype(options, {u_what: u, "p": p, "guess": guess})
+    u = _as_inputs(mech, u, u_what)
+    guess = _as_coords(mech, guess)
+    dtype = jnp.result_type(u, guess, *[jnp.asarray(v) for v in p.values()], float)
+    if options.dtype is not None:
+        dtype = jnp.dtype(options.dtype)
+    u = u.astype(dtype)
+    guess = guess.astype(dtype)
+    p = {k: jnp.asarray(p[k], dtype) for k in mech.params}
+    return u, p, guess
+
+
+def _batch_shape(mech, shapes: dict[str, tuple]):
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        desc = ", ".join(f"{k}: {v}" for k, v in shapes.items())
+        raise ValueError(f"{mech.name}: batch shapes do not broadcast ({desc})") from None
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _solve_flat(mech, options, u, p, guess):
+    return jax.vmap(lambda u_, p_, g_: solve_one(mech, u_, p_, g_, options))(u, p, guess)
+
+
+def solve(mech: Mechanism, u, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), throw: bool = False) -> Solution:
+    """Solve the loop closure for a batch of inputs and designs (jit-compiled, vmapped).
+
+    **Arguments**
+
+    - `u`: driven inputs; array ``(..., dof)`` (or the bare batch array for one input), or a
+      dict ``{input_name: array}``.  Radians for angles, metres for lengths.
+    - `p`: ``{param_name: scalar or array}``; arrays broadcast against the batch.
+    - `guess`: ``(..., m)`` or ``{coord_name: array}``; picks the assembly branch.
+    - `options`: ``SolverOptions``.
+    - `throw`: raise ``RuntimeError`` if any sample did not converge (one bad sample raises
+      for the whole batch).
+
+    **Returns** a ``Solution`` whose fields have the broadcast batch shape in front;
+    differentiable in ``u`` and ``p`` by the implicit function theorem.
+
+    **Raises** ``ValueError`` for unknown names, bad values, shapes or dtypes (before tracing).
+    """
+    u, p, guess = _prepare(mech, u, p, guess, options)
+    shape = _batch_shape(mech, {"u": u.shape[:-1], "guess": guess.shape[:-1], **{f"p[{k!r}]": v.shape for k, v in p.items()}})
+    n = int(np.prod(shape, dtype=np.int64))
+    uf = jnp.broadcast_to(u, shape + u.shape[-1:]).reshape(n, -1)
+    gf = jnp.broadcast_to(guess, shape + guess.shape[-1:]).reshape(n, -1)
+    pf = {k: jnp.broadcast_to(v, shape).reshape(n) for k, v in p.items()}
+    sol = _solve_flat(mech, options, uf, pf, gf)
+    sol = jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), sol)
+    if throw:
+        _raise_if_failed(sol)
+    return sol
+
+
+def _raise_if_failed(sol: Solution):
+    from .status import status_counts
+
+    status = np.asarray(sol.status)
+    if np.any(status != Status.CONVERGED):
+        bad = {k: v for k, v in status_counts(status).items() if k != "CONVERGED"}
+        first = int(np.flatnonzero(status.ravel() != Status.CONVERGED)[0])
+        from .status import status_message
+
+        raise RuntimeError(
+            f"{int(np.sum(status != Status.CONVERGED))} of {status.size} samples failed {bad}; "
+            f"first at flat index {first}: {status_message(status.ravel()[first])}"
+        )
+
+
+# --------------------------------------------------------------------------- continuation
+def _tangent(mech, q, u, p):
+    """``dq/du`` (m x dof) at a solution: ``-Phi_q^{-1} Phi_u``."""
+    jq = jax.jacfwd(mech.residual, 0)(q, u, p)
+    ju = jax.jacfwd(mech.residual, 1)(q, u, p)
+    return jax.vmap(lambda c: -_solve_small(jq, c), in_axes=1, out_axes=1)(ju)
+
+
+def _stroke_one(mech: Mechanism, options: SolverOptions, n_anchors: int, us, p, guess):
+    """Continuation along one stroke ``us (N, dof)`` of one design.
+
+    Anchors (every k-th input and the last) are solved in sequence, each guessed by a
+    first-order predictor ``q + dq/du du`` from the previous anchor, which keeps the branch.
+    Every input is then solved in parallel from the predictor of its nearest anchor.
+    """
+    n = us.shape[0]
+    k = max(1, -(-n // n_anchors))
+    idx = np.unique(np.concatenate([np.arange(0, n, k), [n - 1]]))
+    ua = us[idx]
+    stop = jax.lax.stop_gradient
+    ps = jax.tree_util.tree_map(stop, p)
+
+    def predict(q, t, u_from, u_to):
+        return q + t @ (u_to - u_from)
+
+    def scan_fn(carry, u_next):
+        q, t, u_prev = carry
+        g = predict(q, t, u_prev, u_next)
+        qn, status, *_ = _newton(mech, options, stop(u_next), ps, g)
+        good = status == Status.CONVERGED
+        tn = _tangent(mech, jnp.where(good, qn, q), u_next, ps)
+        tn = jnp.where(good & jnp.all(jnp.isfinite(tn)), tn, t)
+        # After a failure keep the last good anchor: later anchors restart from it.
+        return (jnp.where(good, qn, q), tn, jnp.where(good, u_next, u_prev)), (jnp.where(good, qn, q), tn, jnp.where(good, u_next, u_prev))
+
+    q0, st0, *_ = _newton(mech, options, stop(ua[0]), ps, stop(guess))
+    good0 = st0 == Status.CONVERGED
+    q0 = jnp.where(good0, q0, stop(guess))
+    t0 = _tangent(mech, q0, ua[0], ps)
+    t0 = jnp.where(good0 & jnp.all(jnp.isfinite(t0)), t0, jnp.zeros_like(t0))
+    _, (qa, ta, uaa) = jax.lax.scan(scan_fn, (q0, t0, ua[0]), ua[1:])
+    qa = jnp.concatenate([q0[None], qa])
+    ta = jnp.concatenate([t0[None], ta])
+    uaa = jnp.concatenate([ua[0][None], uaa])
+    nearest = np.clip(np.round(np.arange(n) / k).astype(int), 0, len(idx) - 1)
+    # Points are re-solved below; the anchor arrays only give their guesses.
+    guesses = jax.vmap(predict)(qa[nearest], ta[nearest], uaa[nearest], us)
+    guesses = guesses.at[0].set(stop(guess))
+    return jax.vmap(lambda u_, g_: solve_one(mech, u_, p, g_, options))(us, guesses)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _stroke_batch(mech, options, n_anchors, us, p, guess):
+    return jax.vmap(lambda p_, g_: _stroke_one(mech, options, n_anchors, us, p_, g_))(p, guess)
+
+
+def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int = 256, throw: bool = False) -> Solution:
+    """Solve a whole stroke by continuation, for one design or a batch of designs.
+
+    **Arguments**
+
+    - `us`: the stroke, ``(N,)`` for one input or ``(N, dof)``, in order along the path.
+    - `p`: parameters; scalar leaves for one design, or leaves of shape ``(D,)`` for D designs.
+    - `guess`: coordinates at ``us[0]``, ``(m,)`` or ``(D, m)``: it picks the branch, which
+      continuation then keeps (``BRANCH`` status if a branch indicator changes sign).
+    - `anchors`: how many inputs are solved in sequence; the rest are solved in parallel
+      from the nearest anchor's predictor.  More anchors: safer near toggles, slower.
+
+    **Returns** a ``Solution`` with shape ``(N, ...)`` for one design, ``(D, N, ...)`` for D.
+    """
+    us_, p, guess = _prepare(mech, us, p, guess, options, u_what="us")
+    if us_.ndim != 2:
+        raise ValueError(f"{mech.name}: us must be one stroke of shape (N,) or (N, {mech.dof}), got {jnp.shape(us)}")
+    shapes = {f"p[{k!r}]": v.shape for k, v in p.items()}
+    shapes["guess"] = guess.shape[:-1]
+    shape = _batch_shape(mech, shapes)
+    if len(shape) > 1:
+        raise ValueError(f"{mech.name}: solve_stroke takes one batch axis of designs, got batch shape {shape}")
+    single = shape == ()
+    d = 1 if single else shape[0]
+    pf = {k: jnp.broadcast_to(v, (d,)) for k, v in p.items()}
+    gf = jnp.broadcast_to(guess, (d, mech.m))
+    sol = _stroke_batch(mech, options, int(anchors), us_, pf, gf)
+    if single:
+        sol = jax.tree_util.tree_map(lambda x: x[0], sol)
+    if throw:
+        _raise_if_failed(sol)
+    return sol
