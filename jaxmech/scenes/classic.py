@@ -1,0 +1,74 @@
+"""The classic four-bar and offset slider-crank, as scenes (and as the engine's test bed)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ..mechanism import Mechanism, cis
+from .base import Scene
+
+__all__ = ["FOURBAR", "SLIDER_CRANK", "fourbar_mechanism", "slider_crank_mechanism"]
+
+#: Four-bar: crank a at O2 (angle theta2), coupler b (theta3), rocker c at O4 (theta4),
+#: ground d along +x.  Loop: a e^{i theta2} + b e^{i theta3} - c e^{i theta4} - d = 0.
+#: Branch indicator sin(theta4 - theta3): positive is the "open" assembly.
+fourbar_mechanism = Mechanism(
+    name="fourbar",
+    coords=("theta3", "theta4"),
+    inputs=("theta2",),
+    params=("a", "b", "c", "d"),
+    constraints=lambda q, u, p: [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d],
+    points={
+        "A": lambda q, u, p: p.a * cis(u.theta2),
+        "B": lambda q, u, p: p.d + p.c * cis(q.theta4),
+        "P": lambda q, u, p: p.a * cis(u.theta2) + 0.5 * p.b * cis(q.theta3),
+    },
+    branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+)
+
+#: Offset slider-crank: crank a (theta2), rod b (theta3), slider at x + i e on a line
+#: parallel to x.  Loop: a e^{i theta2} + b e^{i theta3} - x - i e = 0.
+slider_crank_mechanism = Mechanism(
+    name="slider_crank",
+    coords=("theta3", "x"),
+    inputs=("theta2",),
+    params=("a", "b", "e"),
+    lengths=("a", "b", "e", "x"),
+    signed=("e",),
+    constraints=lambda q, u, p: [p.a * cis(u.theta2) + p.b * cis(q.theta3) - q.x - 1j * p.e],
+    points={
+        "A": lambda q, u, p: p.a * cis(u.theta2),
+        "B": lambda q, u, p: q.x + 1j * p.e,
+    },
+    branch=lambda q, u, p: jnp.cos(q.theta3),
+)
+
+
+def _transmission(p, mo):
+    th3, th4 = mo.q[:, 0], mo.q[:, 1]
+    mu = jnp.arccos(jnp.abs(jnp.cos(th4 - th3)))
+    return {"transmission_angle": (mu, "rad")}
+
+
+FOURBAR = Scene(
+    name="fourbar",
+    summary="classic crank-rocker four-bar (a=1, b=3, c=2.5, d=3.5 m), one crank turn at 1 rad/s",
+    mechanism=fourbar_mechanism,
+    defaults={"a": 1.0, "b": 3.0, "c": 2.5, "d": 3.5},
+    guess=lambda p: jnp.array([0.2, 1.2]),
+    stroke=lambda p: (0.0, 2 * jnp.pi),
+    speed=1.0,
+    units={"theta2": "rad", "theta3": "rad", "theta4": "rad"},
+    outputs=_transmission,
+)
+
+SLIDER_CRANK = Scene(
+    name="slider_crank",
+    summary="offset slider-crank (a=0.1, b=0.35, e=0.03 m), one crank turn at 1 rad/s",
+    mechanism=slider_crank_mechanism,
+    defaults={"a": 0.1, "b": 0.35, "e": 0.03},
+    guess=lambda p: jnp.array([0.1, 0.44]),
+    stroke=lambda p: (0.0, 2 * jnp.pi),
+    speed=1.0,
+    units={"theta2": "rad", "theta3": "rad", "x": "m"},
+)
