@@ -154,9 +154,16 @@ def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p,
     u, ud, udd = time_derivatives(u_of_t, t)
     _, qd, qdd = time_derivatives(lambda t_: root(u_of_t(t_)), t)
     d1, d2 = input_derivatives(mech, q, u, p)
+    # Points need no further implicit derivatives: along the exact second-order path
+    # (q + qd s + qdd s^2/2, u + ud s + udd s^2/2) their first two s-derivatives at s = 0
+    # are the true velocity and acceleration.
     pts = {}
     for name in point_names:
-        pts[name] = time_derivatives(lambda t_: mech.point(name, root(u_of_t(t_)), u_of_t(t_), p), t)
+
+        def along(s_, name=name):
+            return mech.point(name, q + qd * s_ + 0.5 * qdd * s_**2, u + ud * s_ + 0.5 * udd * s_**2, p)
+
+        pts[name] = time_derivatives(along, jnp.zeros_like(t))
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
     return (u, ud, udd, q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
 

@@ -170,6 +170,20 @@ def _newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         # Cap the step: far from a root a Newton step can leap onto another branch.
         return dz * jnp.minimum(1.0, opts.max_step / jnp.maximum(size, 1e-300)), size
 
+    # With a branch indicator, a step that changes its sign is refused like one that raises
+    # the residual: the damping then finds the root on the guess's own assembly branch.
+    if mech.branch is not None:
+        b_guess = jnp.sign(mech.branch_value(guess, u, p))
+
+        def same_branch(q):
+            return (b_guess == 0) | (jnp.sign(mech.branch_value(q, u, p)) == b_guess)
+    else:
+
+        def same_branch(q):
+            return jnp.asarray(True)
+    # If the residual stalls while the guard refused better steps across the branch, the
+    # guard is lifted once: a root found there is reported BRANCH; none found, INFEASIBLE.
+
     inputs_ok = _all_finite((u, p, guess))
     r0, j0 = evaluate(guess)
     rn0 = jnp.linalg.norm(r0)
@@ -177,32 +191,43 @@ def _newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     dz0, size0 = step(r0, j0, mu0)
     conv0 = (size0 <= xtol) & (rn0 <= ftol)
 
-    # state: k, q, r, rn, js, dz, size, mu, slow, done, stalled
-    state = (0, guess, r0, rn0, j0, dz0, size0, mu0, 0, conv0 | ~inputs_ok | ~jnp.isfinite(rn0), False)
+    # state: k, q, r, rn, js, dz, size, mu, slow, done, stalled, guard, crossed
+    state = (0, guess, r0, rn0, j0, dz0, size0, mu0, 0, conv0 | ~inputs_ok | ~jnp.isfinite(rn0), False, True, False)
 
     def cond_fn(st):
-        k, *_, done, _stalled = st
+        k, *_, done, _stalled, _guard, _crossed = st
         return (~done) & (k < opts.max_steps)
 
     def body(st):
-        k, q, r, rn, js, dz, size, mu, slow, done, stalled = st
+        k, q, r, rn, js, dz, size, mu, slow, done, stalled, guard, crossed = st
         qt = q - dz * s
         rt, jt = evaluate(qt)
         rtn = jnp.linalg.norm(rt)
-        accept = jnp.isfinite(rtn) & ((rtn < rn) | (rtn <= ftol))
+        better = jnp.isfinite(rtn) & ((rtn < rn) | (rtn <= ftol))
+        on_branch = same_branch(qt) | ~guard
+        crossed = crossed | (better & ~on_branch)
+        accept = better & on_branch
         q, r, rn, js = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), (qt, rt, rtn, jt), (q, r, rn, js))
         jtj_scale = jnp.max(jnp.diag(js.T @ js))
         mu = jnp.where(accept, jnp.where(mu > 1e-6, mu / 10.0, 0.0), jnp.maximum(10.0 * mu, 1e-3))
-        slow = jnp.where(accept & (rtn < 0.9 * st[3]), 0, slow + 1)
+        # Steps refused only for crossing the branch are not lack of progress: the damping
+        # is still shortening them towards this branch's root.
+        slow = jnp.where(accept & (rtn < 0.9 * st[3]), 0, jnp.where(better & ~on_branch, slow, slow + 1))
         dz, size = step(r, js, mu)
         converged = (size <= xtol) & (rn <= ftol)
         stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(jtj_scale, 1.0))
+        lift = stalled & guard & crossed
+        guard = guard & ~lift
+        mu = jnp.where(lift, 0.0, mu)
+        slow = jnp.where(lift, 0, slow)
+        dz, size = jax.tree_util.tree_map(lambda a, b: jnp.where(lift, a, b), step(r, js, mu), (dz, size))
+        stalled = stalled & ~lift
         # A closed loop with a singular Jacobian will never meet xtol: stop and report it.
         singular_closed = (rn <= ftol) & (_cond1(js) > cond_max)
         done = converged | stalled | singular_closed | ~jnp.isfinite(rn)
-        return (k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled)
+        return (k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled, guard, crossed)
 
-    k, q, r, rn, js, dz, size, mu, slow, done, stalled = jax.lax.while_loop(cond_fn, body, state)
+    k, q, r, rn, js, dz, size, mu, slow, done, stalled, guard, crossed = jax.lax.while_loop(cond_fn, body, state)
 
     converged = (size <= xtol) & (rn <= ftol)
     q = jnp.where(converged, q - dz * s, q)  # the last Newton step is free: it was computed already

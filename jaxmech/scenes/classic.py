@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 from ..mechanism import Mechanism, cis
 from .base import Scene
@@ -19,6 +20,8 @@ fourbar_mechanism = Mechanism(
     params=("a", "b", "c", "d"),
     constraints=lambda q, u, p: [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d],
     points={
+        "O2": lambda q, u, p: 0.0 * p.a + 0j,
+        "O4": lambda q, u, p: p.d + 0j,
         "A": lambda q, u, p: p.a * cis(u.theta2),
         "B": lambda q, u, p: p.d + p.c * cis(q.theta4),
         "P": lambda q, u, p: p.a * cis(u.theta2) + 0.5 * p.b * cis(q.theta3),
@@ -37,11 +40,40 @@ slider_crank_mechanism = Mechanism(
     signed=("e",),
     constraints=lambda q, u, p: [p.a * cis(u.theta2) + p.b * cis(q.theta3) - q.x - 1j * p.e],
     points={
+        "O2": lambda q, u, p: 0.0 * p.a + 0j,
         "A": lambda q, u, p: p.a * cis(u.theta2),
         "B": lambda q, u, p: q.x + 1j * p.e,
     },
     branch=lambda q, u, p: jnp.cos(q.theta3),
 )
+
+
+def _fourbar_drawing(p):
+    # Crank O2-A, coupler A-B (its midpoint P traced), rocker O4-B; transmission angle at B
+    # between coupler and rocker; the rocker angle is the output.
+    return {
+        "links": [("O2", "A"), ("A", "B"), ("O4", "B")],
+        "ground": ["O2", "O4"],
+        "trace": ["P"],
+        "transmission": ("A", "B", "O4"),
+        "output": "theta4",
+    }
+
+
+def _slider_crank_drawing(p):
+    # The slider B runs on the line y = e between its dead-centre positions (both dyads
+    # stretched or folded), drawn with a margin of one crank length either side.
+    a, b, e = float(p["a"]), float(p["b"]), float(p["e"])
+    x_in = float(np.sqrt(max((b - a) ** 2 - e * e, 0.0)))
+    x_out = float(np.sqrt((a + b) ** 2 - e * e))
+    return {
+        "links": [("O2", "A"), ("A", "B")],
+        "ground": ["O2"],
+        "slots": [{"line": (complex(x_in - a, e), complex(x_out + a, e))}],
+        "points": ["B"],
+        "trace": ["A"],
+        "output": "x",
+    }
 
 
 def _transmission(p, mo):
@@ -60,6 +92,7 @@ FOURBAR = Scene(
     speed=1.0,
     units={"theta2": "rad", "theta3": "rad", "theta4": "rad"},
     outputs=_transmission,
+    drawing=_fourbar_drawing,
 )
 
 SLIDER_CRANK = Scene(
@@ -71,4 +104,5 @@ SLIDER_CRANK = Scene(
     stroke=lambda p: (0.0, 2 * jnp.pi),
     speed=1.0,
     units={"theta2": "rad", "theta3": "rad", "x": "m"},
+    drawing=_slider_crank_drawing,
 )

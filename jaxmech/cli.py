@@ -1,0 +1,348 @@
+"""The ``jaxmech`` command: list, run, animate, sweep and report the scenes.
+
+```
+jaxmech scenes
+jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR]
+jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.html]
+jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
+jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
+```
+
+Values are SI (m, rad, s, kg, N).  The command is an application, not the library: it
+runs JAX in float64 and keeps compiled kernels in a persistent cache
+(``$XDG_CACHE_HOME/jaxmech/xla``, default ``~/.cache/jaxmech/xla``; set
+``JAX_COMPILATION_CACHE_DIR`` to move it), which makes a second run several times faster.
+
+A user's mistake (unknown scene or parameter, a bad value, a design that cannot be
+assembled) is one line on stderr and exit status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["main"]
+
+PROG = "jaxmech"
+
+
+class UsageError(Exception):
+    """A user's mistake: reported as one line on stderr, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (its default prints the whole usage first)."""
+
+    def error(self, message):
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+# --------------------------------------------------------------------------- setup
+def _setup_jax():
+    """float64 and a persistent compilation cache; called before any array exists."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    if not os.environ.get("JAX_COMPILATION_CACHE_DIR") and jax.config.jax_compilation_cache_dir is None:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        cache = base / "jaxmech" / "xla"
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return  # a read-only home: run without the cache
+        jax.config.update("jax_compilation_cache_dir", str(cache))
+
+
+# --------------------------------------------------------------------------- argument parsing
+def _parse_set(items) -> dict[str, float]:
+    """``["a=1.5", ...]`` -> ``{"a": 1.5}``; ``UsageError`` for a bad item."""
+    out: dict[str, float] = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise UsageError(f"--set expects NAME=VALUE, got {item!r}")
+        try:
+            v = float(value)
+        except ValueError:
+            raise UsageError(f"--set {name}: {value!r} is not a number (SI units: m, rad, s, kg, N)") from None
+        if not np.isfinite(v):
+            raise UsageError(f"--set {name}: value must be finite, got {value!r}")
+        if name in out:
+            raise UsageError(f"--set {name} is given twice")
+        out[name] = v
+    return out
+
+
+def _parse_grid(items) -> dict[str, np.ndarray]:
+    """``["a=0.5:1.5:11"]`` -> ``{"a": linspace(0.5, 1.5, 11)}``; ``UsageError`` if malformed."""
+    grid: dict[str, np.ndarray] = {}
+    for item in items or ():
+        name, sep, rng = item.partition("=")
+        name = name.strip()
+        parts = rng.split(":")
+        if not sep or not name or len(parts) != 3:
+            raise UsageError(f"--grid expects NAME=START:STOP:N, got {item!r}")
+        try:
+            start, stop = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise UsageError(f"--grid {name}: START and STOP must be numbers, got {rng!r}") from None
+        try:
+            n = int(parts[2])
+        except ValueError:
+            raise UsageError(f"--grid {name}: N must be a whole number of values, got {parts[2]!r}") from None
+        if n < 1:
+            raise UsageError(f"--grid {name}: N must be at least 1, got {n}")
+        if not (np.isfinite(start) and np.isfinite(stop)):
+            raise UsageError(f"--grid {name}: START and STOP must be finite, got {rng!r}")
+        if name in grid:
+            raise UsageError(f"--grid {name} is given twice")
+        grid[name] = np.linspace(start, stop, n)
+    return grid
+
+
+def _positive(what):
+    def conv(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be a whole number, got {text!r}") from None
+        if v < 1:
+            raise argparse.ArgumentTypeError(f"{what} must be at least 1, got {v}")
+        return v
+
+    return conv
+
+
+def _points(text):
+    v = _positive("--points")(text)
+    if v < 2:
+        raise argparse.ArgumentTypeError(f"--points must be at least 2, got {v}")
+    return v
+
+
+def _parser() -> _Parser:
+    p = _Parser(
+        prog=PROG,
+        description="Planar mechanisms in JAX: run, plot, animate and sweep the built-in scenes (SI units).",
+        epilog="Compiled kernels are cached in ~/.cache/jaxmech/xla (set JAX_COMPILATION_CACHE_DIR to move it).",
+    )
+    sub = p.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
+
+    sub.add_parser("scenes", help="list the scenes, one per line", description="List the scenes, one line each: name and summary.")
+
+    r = sub.add_parser(
+        "run",
+        help="run a scene over its stroke: CSV, PNG plots, summary",
+        description="Run SCENE over its stroke and write OUT/SCENE.csv (one row per input, columns NAME[UNIT]) "
+        "and the scene's plots as PNG; print the summary table.",
+    )
+    r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
+    r.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI units); repeatable")
+    r.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
+    r.add_argument("--out", default="jaxmech-out", metavar="DIR", help="output folder (default ./jaxmech-out)")
+
+    a = sub.add_parser(
+        "animate",
+        help="animate a scene's stroke to GIF or HTML",
+        description="Animate SCENE over its stroke, with the paths of its traced points, to a GIF (Pillow) or a self-contained HTML player.",
+    )
+    a.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
+    a.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI units); repeatable")
+    a.add_argument("--frames", type=_positive("--frames"), default=60, metavar="N", help="number of frames (default 60)")
+    a.add_argument("--fps", type=_positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
+    a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif or FILE.html (default ./SCENE.gif)")
+
+    s = sub.add_parser(
+        "sweep",
+        help="sweep a scene over a grid of parameters to CSV",
+        description="Run SCENE for every design on the grid (the product of the --grid axes) and write one CSV, with a progress bar.",
+    )
+    s.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
+    s.add_argument("--grid", action="append", metavar="NAME=START:STOP:N", default=[], help="a parameter axis: N values from START to STOP (SI units); repeatable")
+    s.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
+    s.add_argument("--out", default=None, metavar="FILE", help="output CSV (default ./SCENE_sweep.csv)")
+    s.add_argument("--chunk-size", type=_positive("--chunk-size"), default=None, metavar="K", help="designs per compiled batch (default: the sweep's own)")
+
+    rep = sub.add_parser(
+        "report",
+        help="run every scene (CSV, plots, summary) into one folder",
+        description="Run every available scene (or those named) into OUT/SCENE/: CSV, PNG plots; write OUT/README.md "
+        "with every summary and plot, and print the summaries.",
+    )
+    rep.add_argument("--out", default="jaxmech-report", metavar="DIR", help="output folder (default ./jaxmech-report)")
+    rep.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
+    rep.add_argument("--scenes", nargs="+", metavar="NAME", default=None, help="only these scenes (default: all)")
+    return p
+
+
+# --------------------------------------------------------------------------- shared steps
+def _scene(name):
+    from .scenes import get_scene
+
+    try:
+        return get_scene(name)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+def _run(scene, points, overrides):
+    from .scenes import run_scene
+
+    try:
+        return run_scene(scene, points=points, **overrides)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+def write_csv(table: dict, path: Path) -> None:
+    """Write ``SceneResult.table()`` columns to CSV: a header ``NAME[UNIT]``, one row per input."""
+    cols = list(table)
+    data = [np.asarray(table[c]) for c in cols]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        for row in zip(*data):
+            w.writerow([int(v) if np.issubdtype(np.asarray(v).dtype, np.integer) else repr(float(v)) for v in row])
+
+
+def _write_run(result, outdir: Path) -> list[Path]:
+    """CSV + plots of one run into ``outdir``; returns the paths written."""
+    from .plot import save_default_plots
+
+    name = result.scene.name
+    csv_path = outdir / f"{name}.csv"
+    write_csv(result.table(), csv_path)
+    if result.scene.plots is not None:
+        plots = [Path(x) for x in result.scene.plots(result, outdir)]
+    else:
+        plots = save_default_plots(result, outdir)
+    return [csv_path, *plots]
+
+
+# --------------------------------------------------------------------------- verbs
+def _cmd_scenes(args) -> int:
+    from .scenes import get_scene, scene_names
+
+    names = scene_names()
+    width = max(map(len, names), default=0)
+    for n in names:
+        try:
+            summary = get_scene(n).summary
+        except Exception as e:  # noqa: BLE001 - a broken scene module must not hide the others
+            summary = f"(cannot be loaded: {type(e).__name__}: {' '.join(str(e).split())})"
+        print(f"{n:<{width}}  {summary}")
+    return 0
+
+
+def _cmd_run(args) -> int:
+    scene = _scene(args.scene)
+    overrides = _parse_set(args.sets)
+    result = _run(scene, args.points, overrides)
+    paths = _write_run(result, Path(args.out))
+    print(result.summary())
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+def _cmd_animate(args) -> int:
+    from .plot import animate
+
+    scene = _scene(args.scene)
+    overrides = _parse_set(args.sets)
+    out = Path(args.out) if args.out else Path(f"{scene.name}.gif")
+    if out.suffix.lower() not in (".gif", ".html"):
+        raise UsageError(f"--out must end in .gif or .html, got {str(out)!r}")
+    result = _run(scene, max(101, args.frames), overrides)
+    anim = animate(result, out, frames=args.frames, fps=args.fps)
+    print(f"wrote {out} ({len(anim.frame_indices)} frames)")
+    return 0
+
+
+def _cmd_sweep(args) -> int:
+    scene = _scene(args.scene)
+    grid = _parse_grid(args.grid)
+    if not grid:
+        raise UsageError("sweep needs at least one --grid NAME=START:STOP:N")
+    unknown = [n for n in grid if n not in scene.defaults]
+    if unknown:
+        raise UsageError(f"scene {scene.name!r} has no parameter(s) {unknown}; its parameters are: {', '.join(scene.defaults)}")
+    from .sweep import sweep_scene  # written separately; imported only when sweeping
+
+    out = Path(args.out) if args.out else Path(f"{scene.name}_sweep.csv")
+    try:
+        res = sweep_scene(scene, grid=grid, points=args.points, chunk_size=args.chunk_size, progress=True)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    res.to_csv(out)
+    if callable(getattr(res, "summary", None)):
+        print(res.summary())
+    n = int(np.prod([len(v) for v in grid.values()]))
+    print(f"wrote {out} ({n} designs)")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from .scenes import scene_names
+
+    names = scene_names() if args.scenes is None else args.scenes
+    known = scene_names()
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise UsageError(f"unknown scene(s) {unknown}; known scenes: {', '.join(known)}")
+    root = Path(args.out)
+    root.mkdir(parents=True, exist_ok=True)
+    md = ["# jaxmech report", "", f"{len(names)} scene(s), {args.points} inputs over each stroke, SI units.", ""]
+    failed = []
+    for name in names:
+        md += [f"## {name}", ""]
+        try:
+            scene = _scene(name)
+            result = _run(scene, args.points, {})
+            paths = _write_run(result, root / name)
+        except Exception as e:  # noqa: BLE001 - one broken scene must not stop the report
+            msg = " ".join(str(e).split())
+            kind = "" if isinstance(e, UsageError) else f"{type(e).__name__}: "
+            print(f"{PROG} report: scene {name} failed: {kind}{msg}", file=sys.stderr)
+            md += [f"**failed**: {kind}{msg}", ""]
+            failed.append(name)
+            continue
+        summary = result.summary()
+        print(summary, end="\n\n")
+        md += [scene.summary, "", "```", summary, "```", ""]
+        for path in paths:
+            rel = path.relative_to(root).as_posix()
+            md.append(f"![{path.stem}]({rel})" if path.suffix == ".png" else f"- [{path.name}]({rel})")
+        md.append("")
+    readme = root / "README.md"
+    readme.write_text("\n".join(md), encoding="utf-8")
+    print(f"wrote {readme}" + (f"; failed: {', '.join(failed)}" if failed else ""))
+    return 1 if failed else 0
+
+
+_VERBS = {"scenes": _cmd_scenes, "run": _cmd_run, "animate": _cmd_animate, "sweep": _cmd_sweep, "report": _cmd_report}
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``jaxmech`` command; returns the exit status (0 ok, 1 a scene of a
+    report failed, 2 a usage error: unknown scene or parameter, bad value, unassemblable design)."""
+    try:
+        args = _parser().parse_args(argv)
+        _setup_jax()
+        return _VERBS[args.verb](args)
+    except UsageError as e:
+        print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

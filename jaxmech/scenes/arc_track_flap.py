@@ -1,0 +1,563 @@
+"""Circular-arc-track flap driven by a screw jack (seed 003: Arslan, MSc thesis, IZTECH 2022).
+
+**Model.**  An inverted slider-crank whose crank is the flap itself.  The flap (link 2)
+carries two pins, F on a slot of radius ``b1`` and G on a slot of radius ``c1``; both
+slots are circular arcs centred at ``A0``, so the flap turns about the remote centre
+``A0`` (origin; x towards the nose, y up, angles CCW).  The screw (link 3) is pivoted at
+``B0 = a1 e^{i alpha0}``; the nut (link 4) slides on it and is pinned to the flap at A.
+The input is the nut travel ``s34 = |B0 A|`` (m); deploying the flap is CCW (``theta12``
+grows with ``s34``).  The coordinates are the thesis's angles ``theta12``, ``theta13``
+and the flap's translation ``(x2, y2)``, which the two slots hold at zero::
+
+    x2 + i y2 + a2 e^{i(alpha0+theta12)} = a1 e^{i alpha0} + s34 e^{i(alpha0+theta13)}
+    |G| - c1 = 0,   G = x2 + i y2 + c1 e^{i(beta1+beta2+theta12-theta12_i)}
+    |F| - b1 = 0,   F = x2 + i y2 + b1 e^{i(beta1+theta12-theta12_i)}
+
+Each slot equation has a unit gradient, so with the engine's convention
+``I - Q + Phi_x^T lambda = tau e_u`` (constraint force on the bodies ``-Phi_x^T lambda``)
+the slot reactions in newtons are ``G12G = -lambda_G``, ``G12F = -lambda_F`` (outward
+radial positive), the loop multiplier is ``-F42`` and ``tau = F_input`` (N, nut push
+along ``+s34``).  Statics is quasi-static (inertia neglected, as in the thesis; the
+accelerations of A and D stay below 0.1 % of g).
+
+**Loads and the reading that reproduces Table 3.**  Per mechanism (screw jack, two per
+flap): the air moment ``M12 / n_jacks`` (a couple that closes the flap), linear in
+``s34`` from ``M12_i`` (flap closed) to ``M12_f`` (deployed), and the weight
+``weight_share * m_flap * g`` at D with ``weight_share = 1``: each jack carries *half
+the air moment but the whole 12 kg weight*.  Cruise: ``M12_i = M12_f = 750`` N m, the
+column is the closed flap.  Landing: ``M12_i = 220``, ``M12_f = 650`` N m, the column is
+closed (min) / deployed (max), except G12G, which is printed in algebraic min/max order
+(deployed first).  Screw torques use the load ``L = F_input``.
+
+**Document corrections** (details and evidence in ``docs/seeds/arc_track_flap.md``):
+eq. (3.3.2) is ``omega13 = s34_dot / (s34 tan psi)``; eq. (3.3.3)'s second term is ``+``
+(so Fig. 46's alpha12 and acceleration components have the wrong sign); the lead angle
+is ``tan lambda = l / (2 pi r)``; Table 3's landing G12G is deployed-first; the weight is
+counted once per jack (twice per flap) while the moment is halved; "weight below 8 % of
+F_input" holds only with the sheet's metric (8.64 % against eq. 3.5.1's numerator);
+eqs. (3.4.11) and (3.4.15) have scalar sign slips; Table 2 shades alpha2 as an input;
+typos (``sin a0``, ``x_A`` for ``x_A_dot``, Excel's ``ATAN2(x; y)``); landing moments
+are interpolated in ``s34``.
+
+Units: SI throughout (m, rad, N, N m, kg, s).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..actuators import ScrewJack
+from ..dynamics import Body, Gravity, Model, Moment, generalized_forces
+from ..mechanism import Mechanism, cis
+from ..solve import solve_one
+from ..status import Status, status_message
+from .base import Scene, run_scene
+
+__all__ = [
+    "SCENE",
+    "LANDING_SCENE",
+    "SCENARIOS",
+    "THESIS_INPUTS",
+    "MECHANISM",
+    "scene_for",
+    "params",
+    "design",
+    "geometry",
+    "validate",
+    "air_moment",
+    "screw_torques",
+    "SCREW",
+    "MODEL",
+    "quasi_static",
+    "forces",
+    "accelerations",
+    "fairing_depth",
+    "table2",
+    "table3",
+]
+
+_MM = 1e-3
+_DEG = math.pi / 180.0
+
+#: Whole-flap air moments (N m) at the closed (``M12_i``) and deployed (``M12_f``) flap
+#: for the thesis's two flight scenarios (Section 5.2).  Cruise is given for the closed
+#: flap only; the thesis's sheet (Fig. 46) holds it over the stroke.
+SCENARIOS = {
+    "cruise": {"M12_i": 750.0, "M12_f": 750.0},
+    "landing": {"M12_i": 220.0, "M12_f": 650.0},
+}
+
+#: The Chapter 4 design inputs of the case study (Table 2, yellow cells), SI.
+THESIS_INPUTS = dict(
+    a1=275 * _MM, a2=240 * _MM, alpha0=65 * _DEG,
+    b1=350 * _MM, c1=300 * _MM, beta1=40 * _DEG, beta2=20 * _DEG, beta3=35 * _DEG,
+    x_D=-30 * _MM, y_D=340 * _MM, m_flap=12.0, g=9.81,
+    r=16 * _MM, l=8 * _MM, f=0.1,
+)
+
+_PARAMS = ("a1", "a2", "a3", "alpha0", "b1", "c1", "beta1", "beta2", "beta3", "x_D", "y_D",
+           "m_flap", "g", "r", "l", "f", "n_jacks", "weight_share", "M12_i", "M12_f")
+_LENGTH_PARAMS = ("a1", "a2", "a3", "b1", "c1", "x_D", "y_D", "r", "l")
+
+
+# --------------------------------------------------------------------------- design (Ch. 4)
+def _cosine_rule(s34, a1, a2):
+    """theta12, theta13 (rad) from eqs. (3.1.1)-(3.1.2); branch theta12, theta13 in (0, pi)."""
+    th12 = jnp.arccos((a1**2 + a2**2 - s34**2) / (2 * a1 * a2))
+    th13 = jnp.pi - jnp.arccos((a1**2 + s34**2 - a2**2) / (2 * a1 * s34))
+    return th12, th13
+
+
+def _theta12_i(p, xp=jnp):
+    """Closed-flap crank angle of the collinear design: A_i is beta3/2 short of the chord's
+    midpoint W, which lies at acos(h/a1) from B0 seen from A0 (h = a2 cos(beta3/2))."""
+    return xp.arccos(p["a2"] * xp.cos(p["beta3"] / 2) / p["a1"]) - p["beta3"] / 2
+
+
+def _stroke_ends(p, xp=jnp):
+    """(s34_i, s34_f, theta12_i) of the collinear design (Chapter 4, steps 2-4); ``xp=np``
+    for eager checks on plain numbers."""
+    a1, a2, b3 = p["a1"], p["a2"], p["beta3"]
+    # A turns by beta3 on a circle of radius a2: its chord A_i A_f has length
+    # delta_s = 2 a2 sin(beta3/2) at distance h = a2 cos(beta3/2) from A0; B0 on the
+    # chord's line: a1^2 = h^2 + t^2, t = |B0 W| = s34_i + delta_s/2.
+    t = xp.sqrt(a1**2 - (a2 * xp.cos(b3 / 2)) ** 2)
+    s34_i = t - a2 * xp.sin(b3 / 2)
+    s34_f = s34_i + 2 * a2 * xp.sin(b3 / 2)
+    return s34_i, s34_f, _theta12_i(p, xp)
+
+
+def geometry(p: Mapping) -> dict:
+    """Derived geometry of a design (Chapter 4), differentiable in ``p`` (jnp scalars).
+
+    **Returns** (SI): ``delta_s`` = 2 a2 sin(beta3/2), ``h`` = a2 cos(beta3/2), ``t``,
+    ``s34_i``, ``s34_f``, ``theta12_i``, ``theta12_f``, ``theta13_i``, ``theta13_f``
+    (equal by construction), ``mu_min`` = (pi - beta3)/2, ``r_D`` = |A0 D|,
+    ``theta_D_i``, ``A_i``, ``A_f`` and the slot ends ``F1_i``, ``F1_f``, ``F2_i``,
+    ``F2_f`` (complex).  Flap-link lengths (g2, p2, q2, alpha2) come from the engine's
+    points: see ``table2``.
+    """
+    a1, a2, al0, b3 = p["a1"], p["a2"], p["alpha0"], p["beta3"]
+    s34_i, s34_f, _ = _stroke_ends(p)
+    th12_i, th13_i = _cosine_rule(s34_i, a1, a2)
+    th12_f, th13_f = _cosine_rule(s34_f, a1, a2)
+    h = a2 * jnp.cos(b3 / 2)
+    B0 = a1 * cis(al0)
+    F1_i = p["b1"] * cis(p["beta1"])
+    F2_i = p["c1"] * cis(p["beta1"] + p["beta2"])
+    return dict(
+        delta_s=s34_f - s34_i, h=h, t=jnp.sqrt(a1**2 - h**2), s34_i=s34_i, s34_f=s34_f,
+        theta12_i=th12_i, theta12_f=th12_f, theta13_i=th13_i, theta13_f=th13_f,
+        mu_min=(jnp.pi - b3) / 2, r_D=jnp.hypot(p["x_D"], p["y_D"]),
+        theta_D_i=jnp.arctan2(p["y_D"], p["x_D"]),  # the thesis writes Excel's ATAN2(x; y)
+        A_i=B0 + s34_i * cis(al0 + th13_i), A_f=B0 + s34_f * cis(al0 + th13_i),
+        F1_i=F1_i, F1_f=F1_i * cis(b3), F2_i=F2_i, F2_f=F2_i * cis(b3),
+    )
+
+
+def design(*, a1, a2, alpha0, b1, c1, beta1, beta2, beta3, x_D, y_D, m_flap, r, l, f,
+           g=9.81, a3=None, n_jacks=2.0, weight_share=1.0, M12_i=750.0, M12_f=750.0) -> dict:
+    """Chapter 4 design method: inputs -> scene parameters (SI), validated.
+
+    The initial and final nut positions are collinear with B0 (``theta13_f = theta13_i``),
+    so the stroke is the chord of A's circle, ``delta s = 2 a2 sin(beta3/2)``, and the
+    flap turns by exactly ``beta3``, the arc angle of both slots.  ``a3`` (screw length,
+    step 9: slightly longer than ``s34_f``) defaults to ``1.1 s34_f`` rounded up to whole
+    centimetres, which gives the thesis's 250 mm.
+
+    **Raises** ``ValueError`` as ``validate``.
+    """
+    p = dict(a1=a1, a2=a2, a3=0.0, alpha0=alpha0, b1=b1, c1=c1, beta1=beta1, beta2=beta2,
+             beta3=beta3, x_D=x_D, y_D=y_D, m_flap=m_flap, g=g, r=r, l=l, f=f,
+             n_jacks=n_jacks, weight_share=weight_share, M12_i=M12_i, M12_f=M12_f)
+    p = {k: float(v) for k, v in p.items()}
+    _validate_design(p)
+    s34_f = float(_stroke_ends(p, np)[1])
+    p["a3"] = float(a3) if a3 is not None else math.ceil(round(1.1 * s34_f * 100, 9)) / 100
+    validate(p)
+    return p
+
+
+# --------------------------------------------------------------------------- validity (Sec. 5.3)
+def _validate_design(p):
+    if not p["c1"] < p["b1"]:
+        raise ValueError(
+            f"c1 = {p['c1']:.6g} m must be smaller than b1 = {p['b1']:.6g} m (pin G runs in the inner "
+            f"slot; the thesis's sheet colours c1 red): lower c1 or raise b1"
+        )
+    if not p["a1"] > p["a2"]:
+        raise ValueError(
+            f"a1 = {p['a1']:.6g} m must exceed a2 = {p['a2']:.6g} m, otherwise s34_i <= 0 (B0 would lie "
+            f"inside the circle of A): raise a1 or lower a2"
+        )
+    if not 0.0 < p["beta3"] < math.pi:
+        raise ValueError(f"beta3 = {p['beta3']:.6g} rad (flap rotation range) must lie in (0, pi)")
+    if not 0.0 < abs(p["beta2"]) < math.pi:
+        raise ValueError(
+            f"beta2 = {p['beta2']:.6g} rad must lie in (0, pi) in magnitude: with the pins collinear "
+            f"with A0 the slots do not locate the flap; change beta2"
+        )
+    if not p["n_jacks"] > 0:
+        raise ValueError(f"n_jacks = {p['n_jacks']:.6g} must be positive (screw jacks per flap)")
+
+
+def validate(p: Mapping, s34=None) -> None:
+    """The thesis's red cells (Section 5.3) as ``ValueError`` (eager; concrete values).
+
+    1. ``c1 >= b1``: c1 must be the smaller radius.
+    2. Stroke longer than the screw: ``s34_f > a3``.
+    3. A pin leaves its slot: any given ``s34`` outside ``[s34_i, s34_f]`` (equivalently
+       ``theta12 - theta12_i`` outside ``[0, beta3]``; theta12 grows with s34).  The
+       scene's own stroke is that interval by construction, so this applies to travels
+       a caller asks for (``forces(p, s34)``).
+
+    Also: ``a1 > a2`` (else ``s34_i <= 0``), ``0 < beta3 < pi``, ``0 < |beta2| < pi``.
+    """
+    p = {k: float(p[k]) for k in _PARAMS}
+    _validate_design(p)
+    s34_i, s34_f, _ = (float(x) for x in _stroke_ends(p, np))
+    if s34_f > p["a3"]:
+        raise ValueError(
+            f"the stroke is longer than the screw: s34_f = {s34_f:.6g} m > a3 = {p['a3']:.6g} m (the "
+            f"sheet colours a3 red); lengthen the screw to a3 > s34_f, or shorten the stroke "
+            f"2 a2 sin(beta3/2) with a smaller a2 or beta3"
+        )
+    if s34 is not None:
+        s = np.atleast_1d(np.asarray(s34, dtype=float))
+        tol = 1e-12 * max(1.0, s34_f)
+        bad = (s < s34_i - tol) | (s > s34_f + tol)
+        if np.any(bad):
+            raise ValueError(
+                f"s34 = {s[bad][0]:.6g} m is outside the slot range [s34_i, s34_f] = [{s34_i:.6g}, "
+                f"{s34_f:.6g}] m: pins F and G would leave their slots (the sheet colours s34 red); "
+                f"keep s34 within the stroke"
+            )
+
+
+# --------------------------------------------------------------------------- mechanism
+def _flap(q, p):
+    """Flap pose: (translation x2 + i y2, rotation from closed theta12 - theta12_i)."""
+    return q.x2 + 1j * q.y2, q.theta12 - _theta12_i(p)
+
+
+def _pt_A(q, u, p):
+    c, _ = _flap(q, p)
+    return c + p.a2 * cis(p.alpha0 + q.theta12)
+
+
+def _pt_G(q, u, p):
+    c, dth = _flap(q, p)
+    return c + p.c1 * cis(p.beta1 + p.beta2 + dth)
+
+
+def _pt_F(q, u, p):
+    c, dth = _flap(q, p)
+    return c + p.b1 * cis(p.beta1 + dth)
+
+
+def _pt_D(q, u, p):
+    c, dth = _flap(q, p)
+    return c + (p.x_D + 1j * p.y_D) * cis(dth)
+
+
+def _constraints(q, u, p):
+    # Loop A0-B0-A (the thesis's inverted slider-crank, plus the flap translation that the
+    # slots remove); then the slots, each |P - A0| - R with a unit gradient (multiplier in N).
+    loop = _pt_A(q, u, p) - p.a1 * cis(p.alpha0) - u.s34 * cis(p.alpha0 + q.theta13)
+    return [loop, jnp.abs(_pt_G(q, u, p)) - p.c1, jnp.abs(_pt_F(q, u, p)) - p.b1]
+
+
+def _fixed(fn):
+    return lambda q, u, p: fn(p) + 0.0 * u.s34
+
+
+MECHANISM = Mechanism(
+    name="arc_track_flap",
+    coords=("theta12", "theta13", "x2", "y2"),
+    inputs=("s34",),
+    params=_PARAMS,
+    lengths=_LENGTH_PARAMS + ("x2", "y2", "s34"),
+    signed=("x_D", "y_D"),
+    constraints=_constraints,
+    points={
+        "A0": _fixed(lambda p: 0.0j),
+        "B0": _fixed(lambda p: p.a1 * cis(p.alpha0)),
+        "A": _pt_A,
+        "B": lambda q, u, p: p.a1 * cis(p.alpha0) + p.a3 * cis(p.alpha0 + q.theta13),
+        "D": _pt_D,
+        "G": _pt_G,
+        "F": _pt_F,
+        "Ai": _fixed(lambda p: geometry(p)["A_i"]),
+        "Af": _fixed(lambda p: geometry(p)["A_f"]),
+    },
+    # theta13 in (0, pi): A is CCW of B0 seen from A0 (the thesis's assembly).
+    branch=lambda q, u, p: jnp.sin(q.theta13),
+)
+
+
+def _guess(p):
+    g = geometry(p)
+    z = jnp.zeros_like(g["s34_i"])
+    return jnp.stack([g["theta12_i"], g["theta13_i"], z, z])
+
+
+# --------------------------------------------------------------------------- loads and statics
+def air_moment(s34, p: Mapping):
+    """Air moment on ONE mechanism (N m, > 0 closes the flap): ``M12 / n_jacks`` with M12
+    linear in the nut travel from ``M12_i`` (s34_i) to ``M12_f`` (s34_f) (Fig. 48)."""
+    s34_i, s34_f, _ = _stroke_ends(p)
+    x = (s34 - s34_i) / (s34_f - s34_i)
+    return (p["M12_i"] + (p["M12_f"] - p["M12_i"]) * x) / p["n_jacks"]
+
+
+#: The screw jack of eqs. (3.6.9)-(3.6.10): square thread, mean diameter 2 r, lead l.
+SCREW = ScrewJack(lead="l", mean_diameter=lambda p: 2 * p.r, friction="f")
+
+#: Bodies and loads of one mechanism (per screw jack) for ``jaxmech.dynamics``: the flap
+#: (centre of mass D, angle theta12 + const) carrying ``weight_share * m_flap``, gravity,
+#: and the closing air couple ``-air_moment`` on theta12.
+MODEL = Model(
+    MECHANISM,
+    bodies=[Body("D", mass=lambda p: p.weight_share * p.m_flap, angle="theta12", name="flap")],
+    loads=[Gravity("g"), Moment("theta12", lambda q, u, p, v, t: -air_moment(u.s34, p), name="air moment")],
+)
+
+
+def screw_torques(L, p: Mapping):
+    """Square-thread screw torques (N m) for axial load ``L`` (N), eqs. (3.6.9)-(3.6.10),
+    by ``jaxmech.actuators.ScrewJack`` (``SCREW``).
+
+    ``tan(lambda) = l / (2 pi r)`` (the thesis prints ``1/2 pi r``)::
+
+        T_R = r L (2 pi r f + l) / (2 pi r - f l)    raise: open the flap, against L
+        T_L = r L (2 pi r f - l) / (2 pi r + f l)    lower; > 0: self-locking (f > tan lambda)
+    """
+    return SCREW.raise_torque(L, p), SCREW.lower_torque(L, p)
+
+
+def _quasi_static_one(q, u, p):
+    """Quasi-static forces at one solved pose, by ``dynamics.generalized_forces`` (inertia
+    off): ``-Q + Phi_x^T lambda = tau e_u``, so ``Phi_q^T lambda = Q_q`` and
+    ``tau = Phi_u^T lambda - Q_u``.  Multiplier rows: loop (x, y) = ``-F42``; slots G, F
+    (unit gradients) = ``-G12G``, ``-G12F``; ``tau = F_input``.
+    """
+    z = jnp.zeros_like(u)
+    tau, lam = generalized_forces(MODEL, q, u, z, z, p, inertia=False)
+    F_input = tau[0]
+    T_R, T_L = screw_torques(F_input, p)
+    # F42 = -lambda_A (nut on flap); its component normal to the screw is F34y' (= 0).
+    e_s = cis(p["alpha0"] + q[1])
+    F42 = -(lam[0] + 1j * lam[1])
+    return dict(F_input=F_input, G12G=-lam[2], G12F=-lam[3], T_R=T_R, T_L=T_L, M12=air_moment(u[0], p),
+                F34y=jnp.imag(jnp.conj(e_s) * F42), lam=lam)
+
+
+@jax.jit
+def _quasi_static_batch(q, u, p):
+    return jax.vmap(lambda q_, u_: _quasi_static_one(q_, u_, p))(q, u)
+
+
+def quasi_static(q, u, p: Mapping) -> dict:
+    """Forces at solved poses ``q (N, 4)``, ``u (N, 1)`` (the engine's Jacobians, no inertia).
+
+    **Returns** ``{name: (N,)}``: ``F_input`` (N, nut push on the flap along +s34),
+    ``G12G``, ``G12F`` (N, slot on pin, outward radial positive), ``T_R``, ``T_L`` (N m,
+    per jack), ``M12`` (N m, per jack), ``F34y`` (N, nut force normal to the screw) and
+    ``lam`` (the multipliers: loop x, loop y, slot G, slot F).
+    """
+    q, u = jnp.asarray(q), jnp.asarray(u)
+    pj = {k: jnp.asarray(p[k], q.dtype) for k in _PARAMS}
+    return _quasi_static_batch(q, u, pj)
+
+
+def _outputs(p, mo):
+    out = quasi_static(mo.q, mo.u, p)
+    g = p["g"]
+    return {
+        "F_input": (out["F_input"], "N"),
+        "G12G": (out["G12G"], "N"),
+        "G12F": (out["G12F"], "N"),
+        "T_R": (out["T_R"], "N m"),
+        "T_L": (out["T_L"], "N m"),
+        "M12": (out["M12"], "N m"),
+        "aA_over_g": (jnp.abs(mo.points["A"][2]) / g, "-"),
+        "aD_over_g": (jnp.abs(mo.points["D"][2]) / g, "-"),
+    }
+
+
+# --------------------------------------------------------------------------- user functions
+def params(scenario: str = "cruise", **overrides) -> dict:
+    """The case study's parameters for ``scenario`` ("cruise" or "landing"), with overrides."""
+    return scene_for(scenario).params(**overrides)
+
+
+_SOLVED_POINTS = ("A", "B", "D", "G", "F")
+_CHUNK = 32  # one compiled solve serves every batch size (inputs are padded to chunks)
+
+
+@jax.jit
+def _solve_chunk(s, p):
+    """Engine solve (from the closed pose) and quasi-static forces for a chunk of travels."""
+    guess = _guess(p)
+
+    def one(s_):
+        sol = solve_one(MECHANISM, s_[None], p, guess)
+        pts = {k: MECHANISM.point(k, sol.q, s_[None], p) for k in _SOLVED_POINTS}
+        return sol.q, sol.status, {**_quasi_static_one(sol.q, s_[None], p), "points": pts}
+
+    return jax.vmap(one)(s)
+
+
+def _solve_at(p, s):
+    """``(q (N, 4), status (N,), forces)`` at nut travels ``s`` (N,); raises if any fails."""
+    MECHANISM.check_params(p)
+    pj = {k: jnp.asarray(p[k], float) for k in _PARAMS}
+    s = np.atleast_1d(np.asarray(s, float))
+    n = s.shape[0]
+    pad = np.concatenate([s, np.full((-n % _CHUNK,), s[-1])])
+    parts = [_solve_chunk(jnp.asarray(pad[i:i + _CHUNK]), pj) for i in range(0, pad.shape[0], _CHUNK)]
+    q, status, out = jax.tree_util.tree_map(lambda *x: np.concatenate([np.asarray(a) for a in x])[:n], *parts)
+    bad = np.flatnonzero(np.asarray(status) != Status.CONVERGED)
+    if bad.size:
+        raise RuntimeError(
+            f"arc_track_flap: {bad.size} of {n} poses failed, first at s34 = {float(s[bad[0]]):.6g} m: "
+            f"{status_message(status[bad[0]])}"
+        )
+    return q, status, out
+
+
+def forces(p: Mapping, s34=None, *, n: int = 101) -> dict:
+    """Positions and per-jack forces solved by the engine at nut travels ``s34`` (m).
+
+    ``s34`` defaults to ``n`` points over the stroke.  **Returns** ``s34``, ``theta12``,
+    ``theta13``, ``status`` and everything of ``quasi_static`` (arrays ``(N,)``).
+    **Raises** ``ValueError`` (``validate``) for a bad design or a travel outside the slots.
+    """
+    validate(p, s34)
+    s = np.linspace(*_stroke_ends(p, np)[:2], n) if s34 is None else s34
+    s = np.atleast_1d(np.asarray(s, float))
+    q, status, out = _solve_at(p, s)
+    return dict(s34=s, theta12=q[:, 0], theta13=q[:, 1], status=status, **out)
+
+
+def accelerations(p: Mapping, *, n: int = 101) -> dict:
+    """|a_A|/g and |a_D|/g (fractions) over the stroke at the scene's 35 mm/s nut speed
+    (``s34_ddot = 0``), from the engine's implicit second derivatives (``run_scene``).
+
+    **Returns** ``s34`` (m), ``aA_over_g``, ``aD_over_g`` and the ``motion``."""
+    res = run_scene(SCENE, n, **p)
+    return dict(s34=res.motion.u[:, 0], aA_over_g=res.outputs["aA_over_g"][0],
+                aD_over_g=res.outputs["aD_over_g"][0], motion=res.motion)
+
+
+def fairing_depth(p: Mapping, *, n: int = 201) -> dict:
+    """Fairing-depth measures (m).
+
+    - ``h = a2 cos(beta3/2)``: the thesis's saving against a dropped-hinge fairing (which
+      reaches A0); it is also the least distance from A0 to the screw line over the stroke
+      (``screw_line_distance``, from the engine's poses; reached at both stroke ends).
+    - ``y_min``: lowest local y of the mechanism over the stroke (screw tip B, nut A,
+      pivot B0, both slot arcs), and ``lowest_part``.
+    """
+    f = forces(p, n=n)
+    pts = f["points"]
+    a1, al0 = p["a1"], p["alpha0"]
+    B0 = a1 * np.exp(1j * al0)
+    e_s = np.exp(1j * (al0 + np.asarray(f["theta13"])))
+    ang = np.linspace(0.0, p["beta3"], n)
+    parts = {
+        "screw tip B": np.min(np.imag(pts["B"])),
+        "screw pivot B0": B0.imag,
+        "nut A": np.min(np.imag(pts["A"])),
+        "b1-slot": np.min(p["b1"] * np.sin(p["beta1"] + ang)),
+        "c1-slot": np.min(p["c1"] * np.sin(p["beta1"] + p["beta2"] + ang)),
+    }
+    parts = {k: float(v) for k, v in parts.items()}
+    low = min(parts, key=parts.get)
+    return dict(h=p["a2"] * math.cos(p["beta3"] / 2),
+                screw_line_distance=float(np.min(np.abs(np.imag(np.conj(e_s) * -B0)))),
+                y_min=parts[low], lowest_part=low, parts=parts)
+
+
+def table2(p: Mapping | None = None) -> dict:
+    """Table 2's computed entries in the thesis's units (mm, deg), from the engine's
+    closed pose: a3, s34_i, delta_s, g2 = |AD|, p2 = |DG|, q2 = |DF|, alpha2 = angle D A0 A."""
+    p = params() if p is None else p
+    s34_i, s34_f, _ = (float(x) for x in _stroke_ends(p, np))
+    pt = {k: complex(v[0]) for k, v in forces(p, s34_i)["points"].items()}
+    return dict(a3=p["a3"] / _MM, s34_i=s34_i / _MM, delta_s=(s34_f - s34_i) / _MM,
+                g2=abs(pt["D"] - pt["A"]) / _MM, p2=abs(pt["D"] - pt["G"]) / _MM,
+                q2=abs(pt["D"] - pt["F"]) / _MM, alpha2=abs(np.angle(pt["D"] / pt["A"])) / _DEG)
+
+
+def table3(p: Mapping | None = None) -> dict:
+    """Table 3 from the engine, in the thesis's units (N, N mm), per jack.
+
+    ``{"cruise": {entry: value}, "landing": {entry: (closed, deployed)}}``: cruise at the
+    closed flap with ``SCENARIOS["cruise"]``; landing closed with M12_i and deployed with
+    M12_f of ``SCENARIOS["landing"]``.  Entries F_input, G12G, G12F, F34y, T_R, T_L.
+    NB the thesis prints landing G12G in algebraic min/max order, i.e. (deployed, closed).
+    """
+    p = params() if p is None else dict(p)
+    ends = [float(x) for x in _stroke_ends(p, np)[:2]]
+
+    def at(scenario):
+        f = forces({**p, **SCENARIOS[scenario]}, jnp.asarray(ends))
+        return {k: np.asarray(f[k]) * (1 / _MM if k in ("T_R", "T_L") else 1.0)
+                for k in ("F_input", "G12G", "G12F", "F34y", "T_R", "T_L")}
+
+    cr, la = at("cruise"), at("landing")
+    return {"cruise": {k: float(v[0]) for k, v in cr.items()},
+            "landing": {k: (float(v[0]), float(v[1])) for k, v in la.items()}}
+
+
+# --------------------------------------------------------------------------- scenes
+def _drawing(p):
+    return {
+        "links": [("B0", "B"), ("A", "G"), ("G", "F"), ("F", "D"), ("D", "A")],
+        "ground": ["A0", "B0"],
+        "slots": [{"centre": "A0", "radius": float(p["b1"])}, {"centre": "A0", "radius": float(p["c1"])},
+                  {"line": ("B0", "B")}],
+        "chords": [("Ai", "Af")],
+        "trace": ["A", "D", "G", "F"],
+    }
+
+
+def _stroke(p):
+    s34_i, s34_f, _ = _stroke_ends(p, np)
+    return float(s34_i), float(s34_f)
+
+
+@functools.cache
+def scene_for(scenario: str = "cruise") -> Scene:
+    """The scene with the air moments of a flight scenario ("cruise" or "landing")."""
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    defaults = design(**THESIS_INPUTS, a3=0.250, **SCENARIOS[scenario])
+    return Scene(
+        name="arc_track_flap" if scenario == "cruise" else f"arc_track_flap_{scenario}",
+        summary=(f"circular-arc-track flap, screw jack at 35 mm/s, {scenario} air moment "
+                 f"{SCENARIOS[scenario]['M12_i']:g}-{SCENARIOS[scenario]['M12_f']:g} N m (Arslan 2022)"),
+        mechanism=MECHANISM,
+        defaults=defaults,
+        guess=_guess,
+        stroke=_stroke,
+        speed=0.035,
+        units={"s34": "m", "theta12": "rad", "theta13": "rad", "x2": "m", "y2": "m"},
+        outputs=_outputs,
+        validate=validate,
+        drawing=_drawing,
+        document="docs/seeds/arc_track_flap.md (seed /work/shared/seeds/003_7443f8f08b2c3632.txt)",
+    )
+
+
+#: Cruise (the default flight scenario): M12 = 750 N m over the stroke.
+SCENE = scene_for("cruise")
+#: Landing: M12 from 220 N m (closed) to 650 N m (deployed), linear in s34.
+LANDING_SCENE = scene_for("landing")

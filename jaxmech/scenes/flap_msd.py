@@ -1,0 +1,487 @@
+"""The MSD double-flap extraction mechanism (seed 000_0e5ea70f9886b82a).
+
+Source: "MSD Project: flap extraction and retraction system", PoliMi, Group 6,
+A.Y. 2022/23.  The analysis behind every choice below, with evidence, is in
+``docs/seeds/flap_msd.md``; ``tests/seeds/reference_flap_msd.py`` is an independent
+numpy/scipy implementation that the tests compare against.
+
+**Model.**  A crank ``OA`` (angle ``alpha``, counter-clockwise, driven at O) moves the
+main flap (chord ``c1``, hinged at the fixed point ``C``) through the coupler ``AG``;
+``G`` is the tip of the main flap's arm ``CG`` (perpendicular to the chord).  The bar
+``BD`` (fixed pivot ``B``) and the straight bar ``DGE`` (through ``G``) carry ``E``, and
+the link ``EH`` turns the second flap (chord ``c2``, hinged at the main flap's trailing
+edge ``F``; ``H`` is the tip of its arm ``FH``).  Gauss plane, angles counter-clockwise
+from +x, SI units; the flap deflections ``delta`` and ``theta`` are *clockwise*
+(chords along ``e^{-i delta}`` and ``e^{-i theta}``).  Three loop closures (report §2):
+
+    L1 = a e^{i alpha} + b e^{i beta} - (l - i r) - i c e^{-i delta}              (§2.1)
+    L2 = d e^{i phi} + p e^{i psi} - (s - i t) - i c e^{-i delta}                  (§2.2)
+    L3 = (i c - c1) e^{-i delta} + g e^{i psi} + h e^{i xi} - i z e^{-i theta}      (§2.3)
+
+**Branch.**  Of the four assemblies at ``alpha = 275 deg`` (loop 1 has only one), the
+scene takes the dyad signs (+, -, +): flaps retracted at the start (delta = 0.95 deg,
+theta = 0.02 deg) and the second flap turning through 60.58 deg over the stroke, the
+design goal of §1.  The branch indicator ``min(cos(beta+delta), -sin(phi-psi),
+cos(theta+xi))`` is positive on it; it vanishes at a toggle of any loop.
+
+**Loads (§3.1).**  Masses ``M``, ``m`` at the chord midpoints ``G1``, ``G2`` with
+inertias ``J_M``, ``J_m``; gravity ``G``; linearised lift ``F1 = q S1 Cl_delta delta`` at
+the quarter chord ``AC1`` normal to the chord (``+i e^{-i delta}``), ``F2`` likewise with
+``theta`` at ``AC2``; pure aerodynamic moments entering the power as the report's Pi
+writes them, ``MAC1 delta_dot + MAC2 theta_dot`` with ``MAC = q S c Cm``.  These are the
+bodies and loads of ``MODEL`` (a ``jaxmech.dynamics.Model``); the driving torque at O
+follows by virtual power (``torque``), and the DC motor's steady voltage is
+``v = R_a T / K_m + K_m alpha_dot`` (``MOTOR``, §3.2, inductance neglected).
+
+**Singular positions.**  ``singular_positions()`` finds, with the engine, the toggles that
+bound the branch: loop 2 (``phi - psi = -180 deg``) at 256.396 deg and 440.942 deg
+(= 80.942 deg); the stroke is far from both.
+
+**Corrections to the document** (22 in all, with evidence, in ``docs/seeds/flap_msd.md``
+section (d)); those that change numbers:
+
+- §2.1-§2.3 velocity and acceleration formulas: a wrong matrix sign, a doubled factor
+  ``a``, ``sin(beta)`` for ``sin(psi)``, ``sin(phi+psi)`` for ``sin(phi-psi)``, missing
+  squares, a spurious factor ``c``, a missing ``c``, missing brackets.  Not used here:
+  every derivative comes from the loop closures by the implicit function theorem.
+- §2.3 singularity condition: ``theta + xi != pi/2 + k pi``, not ``k pi/2``.
+- §3.1 printed ``T_m``: ``F2 c1 cos(theta - delta)`` (printed ``sin``: up to 852 N m, 28 %,
+  off at 305 deg) and ``m c2^2/4`` (printed ``m (c2^2/4)^2``); ``dT/dt`` has ``m c2^2/4``
+  for the theta-dd coefficient (printed ``m c1^2/4``); the ``AC1`` velocity is mislabelled
+  and wrong.  ``torque_document`` transcribes the printed formula for comparison.
+- §4 data: ``g`` (printed ``q``) is the E-G length; ``J_M = M c1 3.5/K`` and
+  ``J_m = m c2 2.5/K`` are used as printed (kg m^2), though their units are kg m; their
+  effect on the torque is below 2 N m.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..actuators import DCMotor
+from ..dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
+from ..kinematics import Motion
+from ..mechanism import Mechanism, cis
+from ..solve import solve_stroke
+from ..status import Status
+from .base import Scene
+
+__all__ = [
+    "SCENE",
+    "mechanism",
+    "DEFAULTS",
+    "closed_form_positions",
+    "MODEL",
+    "MOTOR",
+    "loop_determinants",
+    "torque",
+    "torque_document",
+    "voltage",
+    "Toggle",
+    "singular_positions",
+]
+
+_K = 17.0  # the report's "meter-model conversion factor" (§4): drawing units per metre
+_DEG = np.pi / 180.0
+ALPHA_START, ALPHA_END = 275.0 * _DEG, 320.0 * _DEG
+COORDS = ("beta", "delta", "phi", "psi", "xi", "theta")
+
+#: Report §4 data in SI units (lengths in m: the report's drawing units divided by K).
+DEFAULTS = {
+    # kinematics
+    "a": 3.5 / _K, "b": 9.0 / _K, "c": 5.0 / _K,          # crank OA, coupler AG, flap arm CG
+    "l": 9.0 / _K, "r": 6.5 / _K,                          # C - O = l - i r
+    "d": 9.0 / _K, "p": 2.25 / _K,                         # bar BD, D-G part of bar DGE
+    "s": 7.0 / _K, "t": 8.0 / _K,                          # C - B = s - i t
+    "g": 3.0 / _K, "h": 17.75 / _K, "z": 4.0 / _K,         # G-E, link EH, second flap arm FH
+    "c1": 1.0, "c2": 0.5,                                  # chords (not scaled by K)
+    # inertia (J as printed: M c1 3.5/K, m c2 2.5/K; see the module docstring)
+    "M": 20.0, "m": 10.0,
+    "J_M": 20.0 * 1.0 * 3.5 / _K, "J_m": 10.0 * 0.5 * 2.5 / _K,
+    "G": 9.81,
+    # aerodynamics: rho (kg/m^3), U = 240 km/h, S = 1.5 c (m^2), Cl (1/rad), Cm (-)
+    "rho": 1.225, "U": 240.0 / 3.6, "S1": 1.5, "S2": 0.75,
+    "Cl_delta": 1.4, "Cl_theta": 1.3, "Cm_delta": -0.3, "Cm_theta": -0.3,
+    # DC motor: armature resistance (ohm), torque constant (N m/A)
+    "R_a": 2.0, "K_m": 20.0,
+}
+
+_LENGTHS = ("a", "b", "c", "l", "r", "d", "p", "s", "t", "g", "h", "z", "c1", "c2")
+# Offsets of the fixed pivots: any sign (and zero) is a valid design.
+_SIGNED = ("l", "r", "s", "t")
+
+# Expected sign of the acos in each dyad (circle intersection) on the chosen branch.
+BRANCH_SIGNS = (1.0, -1.0, 1.0)
+
+
+# --------------------------------------------------------------------------- geometry
+def _loops(q, u, p):
+    """The report's three loop closures (§2.1-§2.3), each a complex number that must vanish."""
+    arm = 1j * p.c * cis(-q.delta)  # G - C
+    return [
+        p.a * cis(u.alpha) + p.b * cis(q.beta) - (p.l - 1j * p.r) - arm,
+        p.d * cis(q.phi) + p.p * cis(q.psi) - (p.s - 1j * p.t) - arm,
+        (1j * p.c - p.c1) * cis(-q.delta) + p.g * cis(q.psi) + p.h * cis(q.xi) - 1j * p.z * cis(-q.theta),
+    ]
+
+
+def _C(p):
+    return p.l - 1j * p.r
+
+
+def _B(p):
+    return _C(p) - (p.s - 1j * p.t)
+
+
+def _F(q, p):
+    return _C(p) + p.c1 * cis(-q.delta)
+
+
+_POINTS = {
+    "O": lambda q, u, p: 0.0 * cis(u.alpha),
+    "A": lambda q, u, p: p.a * cis(u.alpha),
+    "C": lambda q, u, p: _C(p) + 0.0 * cis(u.alpha),
+    "B": lambda q, u, p: _B(p) + 0.0 * cis(u.alpha),
+    "G": lambda q, u, p: _C(p) + 1j * p.c * cis(-q.delta),
+    "D": lambda q, u, p: _B(p) + p.d * cis(q.phi),
+    "E": lambda q, u, p: _C(p) + 1j * p.c * cis(-q.delta) + p.g * cis(q.psi),
+    "F": lambda q, u, p: _F(q, p),
+    "H": lambda q, u, p: _F(q, p) + 1j * p.z * cis(-q.theta),
+    "L": lambda q, u, p: _F(q, p) + p.c2 * cis(-q.theta),
+    "G1": lambda q, u, p: _C(p) + 0.5 * p.c1 * cis(-q.delta),
+    "G2": lambda q, u, p: _F(q, p) + 0.5 * p.c2 * cis(-q.theta),
+    "AC1": lambda q, u, p: _C(p) + 0.25 * p.c1 * cis(-q.delta),
+    "AC2": lambda q, u, p: _F(q, p) + 0.25 * p.c2 * cis(-q.theta),
+}
+
+
+def _branch(q, u, p):
+    # Each loop's 2x2 Jacobian determinant over its own unknowns is, up to a positive
+    # factor, cos(beta+delta), -sin(phi-psi), cos(theta+xi): the sign of the cross
+    # product of the loop's two unknown links, i.e. its assembly mode.  All three are
+    # positive on the chosen branch; the minimum changes sign if any dyad flips.
+    return jnp.minimum(
+        jnp.minimum(jnp.cos(q.beta + q.delta), -jnp.sin(q.phi - q.psi)), jnp.cos(q.theta + q.xi)
+    )
+
+
+mechanism = Mechanism(
+    name="flap_msd",
+    coords=COORDS,
+    inputs=("alpha",),
+    params=tuple(DEFAULTS),
+    constraints=_loops,
+    lengths=_LENGTHS,
+    signed=_SIGNED,
+    points=_POINTS,
+    branch=_branch,
+)
+
+
+def loop_determinants(q, p):
+    """Jacobian determinants of the three loops over their own unknowns (m^2).
+
+    ``(b c cos(beta+delta), -d p sin(phi-psi), h z cos(theta+xi))`` for one sample
+    (``q`` of shape ``(6,)``): the constraint Jacobian is block lower triangular, so
+    ``det Phi_q`` is their product and loop ``k`` is singular (a toggle: its two unknown
+    links aligned) where the ``k``-th vanishes.  The report's ``det(A)`` (§2.1-§2.3) has
+    the opposite sign (its first row is negated).
+    """
+    q = jnp.asarray(q)
+    beta, delta, phi, psi, xi, theta = (q[..., i] for i in range(6))
+    return jnp.stack(
+        [
+            p["b"] * p["c"] * jnp.cos(beta + delta),
+            -p["d"] * p["p"] * jnp.sin(phi - psi),
+            p["h"] * p["z"] * jnp.cos(theta + xi),
+        ],
+        axis=-1,
+    )
+
+
+# --------------------------------------------------------------------------- closed-form guess
+def _dyad(p1, r1, p2, r2, sign):
+    """Angle of ``X - p1`` where ``|X - p1| = r1``, ``|X - p2| = r2`` (NaN if they miss)."""
+    dist = jnp.abs(p2 - p1)
+    cos_ = (r1**2 + dist**2 - r2**2) / (2.0 * r1 * dist)
+    return jnp.angle(p2 - p1) + sign * jnp.arccos(cos_)  # arccos gives NaN for |cos_| > 1
+
+
+def closed_form_positions(p: Mapping, alpha, signs=BRANCH_SIGNS):
+    """Positions ``q`` by three circle intersections (dyads), one per loop.
+
+    ``signs`` picks each dyad's assembly; the default is the scene's branch.  NaN where a
+    loop cannot close.  Used as the Newton guess (``SCENE.guess``) so that a changed
+    design still starts on its own branch.
+
+    **Returns** ``(..., 6)`` array ``(beta, delta, phi, psi, xi, theta)`` in rad (the batch
+    shape of the parameters and ``alpha`` in front).
+    """
+    alpha = jnp.asarray(alpha, float)
+    C = p["l"] - 1j * p["r"]
+    B = C - (p["s"] - 1j * p["t"])
+    A = p["a"] * jnp.exp(1j * alpha)
+    beta = _dyad(A, p["b"], C, p["c"], signs[0])  # loop 1: G on circles about A and C
+    G = A + p["b"] * jnp.exp(1j * beta)
+    delta = -jnp.angle((G - C) / (1j * p["c"]))
+    phi = _dyad(B, p["d"], G, p["p"], signs[1])  # loop 2: D on circles about B and G
+    D = B + p["d"] * jnp.exp(1j * phi)
+    psi = jnp.angle(G - D)
+    E = G + p["g"] * jnp.exp(1j * psi)
+    F = C + p["c1"] * jnp.exp(-1j * delta)
+    xi = _dyad(E, p["h"], F, p["z"], signs[2])  # loop 3: H on circles about E and F
+    H = E + p["h"] * jnp.exp(1j * xi)
+    theta = -jnp.angle((H - F) / (1j * p["z"]))
+    return jnp.stack([beta, delta, phi, psi, xi, theta], axis=-1)
+
+
+def _validate(p):
+    q = np.asarray(closed_form_positions(p, ALPHA_START))
+    if np.all(np.isfinite(q)):
+        return
+    C = p["l"] - 1j * p["r"]
+    B = C - (p["s"] - 1j * p["t"])
+    A = p["a"] * np.exp(1j * ALPHA_START)
+    if not np.isfinite(q[0]):
+        what = f"|A - C| = {abs(A - C):.6g} m must lie in [|b - c|, b + c] = [{abs(p['b'] - p['c']):.6g}, {p['b'] + p['c']:.6g}] m"
+        loop, fix = 1, "a, b, c, l or r"
+    elif not np.isfinite(q[2]):
+        G = C + 1j * p["c"] * np.exp(-1j * q[1])
+        what = f"|G - B| = {abs(G - B):.6g} m must lie in [|d - p|, d + p] = [{abs(p['d'] - p['p']):.6g}, {p['d'] + p['p']:.6g}] m"
+        loop, fix = 2, "d, p, s or t"
+    else:
+        G = C + 1j * p["c"] * np.exp(-1j * q[1])
+        E = G + p["g"] * np.exp(1j * q[3])
+        F = C + p["c1"] * np.exp(-1j * q[1])
+        what = f"|E - F| = {abs(E - F):.6g} m must lie in [|h - z|, h + z] = [{abs(p['h'] - p['z']):.6g}, {p['h'] + p['z']:.6g}] m"
+        loop, fix = 3, "g, h, z or c1"
+    raise ValueError(f"flap_msd: loop {loop} cannot close at alpha = 275 deg: {what}; change {fix}")
+
+
+# --------------------------------------------------------------------------- loads and torque
+def _qdyn(p):
+    return 0.5 * p.rho * p.U**2  # dynamic pressure (Pa)
+
+
+#: Flap bodies and loads (report §3.1).  Masses at the chord midpoints G1, G2; the flap
+#: angles are clockwise, so the bodies' counter-clockwise angles are -delta and -theta.
+#: Lift ``q S Cl angle`` at the quarter chords, normal to the chord (``+i e^{-i angle}``,
+#: i.e. ``F1x = F1 sin(delta)``, ``F1y = F1 cos(delta)``).  The aerodynamic moments are
+#: generalized forces on ``delta`` and ``theta``: power ``MAC1 delta_dot + MAC2 theta_dot``,
+#: exactly as the report's Pi writes them.
+MODEL = Model(
+    mechanism,
+    bodies=(
+        Body("G1", mass="M", angle=lambda q, u, p: -q.delta, inertia="J_M", name="main flap"),
+        Body("G2", mass="m", angle=lambda q, u, p: -q.theta, inertia="J_m", name="second flap"),
+    ),
+    loads=(
+        Gravity(g="G"),
+        PointForce("AC1", lambda q, u, p, v, t: _qdyn(p) * p.S1 * p.Cl_delta * q.delta * 1j * cis(-q.delta), name="lift F1"),
+        PointForce("AC2", lambda q, u, p, v, t: _qdyn(p) * p.S2 * p.Cl_theta * q.theta * 1j * cis(-q.theta), name="lift F2"),
+        Moment("delta", lambda q, u, p, v, t: _qdyn(p) * p.S1 * p.c1 * p.Cm_delta, name="MAC1"),
+        Moment("theta", lambda q, u, p, v, t: _qdyn(p) * p.S2 * p.c2 * p.Cm_theta, name="MAC2"),
+    ),
+)
+
+#: The DC motor on the crank (§3.2), steady current (``L_a di/dt`` neglected).
+MOTOR = DCMotor(resistance="R_a", constant="K_m")
+
+
+@jax.jit
+def _torque_batch(p, q, u, ud, udd, t):
+    return jax.vmap(lambda *a: generalized_forces(MODEL, *a[:4], p, a[4])[0][0])(q, u, ud, udd, t)
+
+
+def torque(p: Mapping, motion: Motion):
+    """Driving torque ``T_m`` at O (N m, counter-clockwise on the crank), ``(N,)``.
+
+    Inverse dynamics by virtual power (``jaxmech.dynamics.generalized_forces`` on ``MODEL``):
+    flap masses and inertias, gravity, lift and aerodynamic moments; the report's power
+    balance ``T_m alpha_dot = dT/dt - Pi_loads`` without the division by ``alpha_dot``, so
+    it holds for any drive law and at rest.  NaN where the position solve failed.
+    """
+    dt = motion.q.dtype
+    pj = {k: jnp.asarray(v, dt) for k, v in p.items()}
+    return _torque_batch(pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt))
+
+
+def voltage(p: Mapping, motion: Motion, torque_values=None):
+    """Steady DC-motor voltage ``v = R_a T_m / K_m + K_m alpha_dot`` (V), §3.2 (``L_a di/dt``
+    neglected).  ``torque_values`` (N m) defaults to ``torque(p, motion)``."""
+    tq = torque(p, motion) if torque_values is None else torque_values
+    return MOTOR.steady_voltage(tq, motion.u_dot[:, 0], p)
+
+
+def torque_document(p: Mapping, motion: Motion, *, corrected: bool = False):
+    """The report's printed ``T_m`` (§3.1), evaluated on this motion (N m).
+
+    Printed: ``... + F2 c1 sin(theta - delta) ...`` and ``theta_dd (m (c2^2/4)^2 + J_m)``.
+    ``corrected=True`` uses ``cos(theta - delta)`` and ``m c2^2/4``; it then equals
+    ``torque`` (the report's energy method, done right).  Inputs: ``delta' = d delta/d alpha``,
+    ``theta'``, the actual ``delta_dd``, ``theta_dd`` and ``alpha_dot``.
+    """
+    q, qdd, d1, ud = motion.q, motion.q_ddot, motion.dq_du[..., 0], motion.u_dot[:, 0]
+    de, th, dp, tp, dedd, thdd = q[:, 1], q[:, 5], d1[:, 1], d1[:, 5], qdd[:, 1], qdd[:, 5]
+    M, m, c1, c2, G = p["M"], p["m"], p["c1"], p["c2"], p["G"]
+    qdyn = 0.5 * p["rho"] * p["U"] ** 2
+    F1, F2 = qdyn * p["S1"] * p["Cl_delta"] * de, qdyn * p["S2"] * p["Cl_theta"] * th
+    mac1, mac2 = qdyn * p["S1"] * c1 * p["Cm_delta"], qdyn * p["S2"] * c2 * p["Cm_theta"]
+    trig = jnp.cos(th - de) if corrected else jnp.sin(th - de)
+    i2 = m * c2**2 / 4 if corrected else m * (c2**2 / 4) ** 2
+    return (
+        (dedd * (M * c1**2 / 4 + p["J_M"] + m * c1**2) - mac1 + F1 * c1 / 4 + F2 * c1 * trig
+         - (M * G * c1 / 2 + m * G * c1) * jnp.cos(de)) * dp
+        + (thdd * (i2 + p["J_m"]) - mac2 + F2 * c2 / 4 - m * G * c2 / 2 * jnp.cos(th)) * tp
+        + 0.5 * m * c1 * c2 * ((thdd * dp + dedd * tp) * jnp.cos(th - de)
+                               - dp * tp * jnp.sin(th - de) * (tp - dp) * ud**2)
+    )
+
+
+def _outputs(p, motion: Motion):
+    tq = torque(p, motion)
+    qdyn = 0.5 * p["rho"] * p["U"] ** 2
+    return {
+        "torque": (tq, "N m"),
+        "voltage": (voltage(p, motion, tq), "V"),
+        "current": (MOTOR.steady_current(tq, p), "A"),
+        "torque_document": (torque_document(p, motion), "N m"),
+        "lift_main": (qdyn * p["S1"] * p["Cl_delta"] * motion.q[:, 1], "N"),
+        "lift_second": (qdyn * p["S2"] * p["Cl_theta"] * motion.q[:, 5], "N"),
+    }
+
+
+# --------------------------------------------------------------------------- singular positions
+@dataclasses.dataclass(frozen=True)
+class Toggle:
+    """A singular (toggle) position of the scene's branch.
+
+    - `alpha`: crank angle (rad), unwrapped: continuous with the stroke (may exceed 2 pi).
+    - `q`: ``{coordinate: angle (rad)}`` there.
+    - `loop`: which loop closure is singular (1, 2 or 3): its two unknown links are aligned.
+    - `side`: ``"below"`` or ``"above"`` the stroke; the branch cannot be assembled past it.
+    - `residual`: ``|Phi|`` there (m); `det`: ``det Phi_q / L^6`` (-), both ~0.
+    """
+
+    alpha: float
+    q: dict
+    loop: int
+    side: str
+    residual: float
+    det: float
+
+
+def _fold_residual(z, p, L):
+    # Bordered system for a limit point: Phi(q, alpha) = 0 and det Phi_q(q, alpha) = 0.
+    # At a simple fold its Jacobian is regular, so Newton converges quadratically there,
+    # where a Newton on alpha alone (det of the solved q(alpha)) sees a square-root cusp.
+    q, u = z[:6], z[6:]
+    phi = mechanism.residual(q, u, p) / L
+    jac = jax.jacfwd(mechanism.residual)(q, u, p) / L
+    return jnp.concatenate([phi, jnp.linalg.det(jac)[None]])
+
+
+@jax.jit
+def _fold_newton(z, p):
+    L = mechanism.length_scale(p)
+
+    def body(_, z):
+        f = _fold_residual(z, p, L)
+        j = jax.jacfwd(_fold_residual)(z, p, L)
+        return z - jnp.linalg.solve(j, f)
+
+    z = jax.lax.fori_loop(0, 30, body, z)
+    return z, _fold_residual(z, p, L)
+
+
+_CHUNK = 46  # points per continuation call: the shape run_scene(SCENE, 46) compiles
+
+
+def singular_positions(p: Mapping | None = None, *, step_deg: float = 1.0, span_deg: float = 360.0) -> tuple[Toggle, Toggle]:
+    """The singular positions nearest to the stroke, below and above it, on the scene's branch.
+
+    Found with the engine in two steps: (1) ``solve_stroke`` continues the branch from the
+    stroke start downwards and upwards in steps of ``step_deg`` (over at most ``span_deg``);
+    the first position that is not ``CONVERGED``, or leaves the branch, brackets the toggle;
+    (2) a Newton on the bordered system ``Phi(q, alpha) = 0, det Phi_q = 0`` in ``(q, alpha)``,
+    started from the last converged position, pins it to machine precision.  For this
+    mechanism they are also the **assembly limits** of the branch: past them loop 2 cannot
+    close (``|G - B| < d - p``).
+
+    **Arguments**: `p`: parameter overrides (default: the report's design).
+
+    **Returns** ``(below, above)`` ``Toggle`` records; ``alpha`` is continuous with the
+    stroke (the upper toggle of the default design is at 440.94 deg, i.e. 80.94 deg).
+
+    **Raises** ``RuntimeError`` if no toggle lies within ``span_deg`` on one side, or the
+    bordered Newton does not converge inside its bracket.
+    """
+    p = SCENE.params(**(p or {}))
+    pj = {k: jnp.asarray(v, float) for k, v in p.items()}
+    q_start = closed_form_positions(p, ALPHA_START)
+    step = step_deg * _DEG
+    out = []
+    for side, sgn in (("below", -1.0), ("above", 1.0)):
+        a0, qa, k_fail = ALPHA_START, q_start, None
+        # Chunks of _CHUNK points, each continuing from the previous chunk's last position.
+        for _ in range(int(np.ceil(span_deg / step_deg / (_CHUNK - 1)))):
+            us = a0 + sgn * step * np.arange(_CHUNK)
+            sol = solve_stroke(mechanism, jnp.asarray(us), p, qa)
+            good = (np.asarray(sol.status) == Status.CONVERGED) & (np.asarray(sol.branch) > 0)
+            if not good[0]:
+                raise RuntimeError(f"flap_msd: the branch is lost at alpha = {np.rad2deg(a0):.6g} deg")
+            if not np.all(good):
+                k_fail = int(np.flatnonzero(~good)[0])
+                break
+            a0, qa = us[-1], sol.q[-1]
+        if k_fail is None:
+            raise RuntimeError(f"flap_msd: no singular position within {span_deg} deg {side} the stroke start")
+        lo, hi = sorted((us[k_fail - 1], us[k_fail]))
+        z, f = _fold_newton(jnp.concatenate([sol.q[k_fail - 1], jnp.asarray(us[k_fail - 1 : k_fail])]), pj)
+        z, f = np.asarray(z), np.asarray(f)
+        if not (np.all(np.abs(f) < 1e-10) and lo - 1e-9 <= z[6] <= hi + 1e-9):
+            raise RuntimeError(f"flap_msd: the toggle {side} the stroke did not converge in its bracket "
+                               f"[{np.rad2deg(lo):.6g}, {np.rad2deg(hi):.6g}] deg")
+        dets = np.asarray(loop_determinants(z[:6], p))
+        scale = np.array([p["b"] * p["c"], p["d"] * p["p"], p["h"] * p["z"]])
+        out.append(Toggle(
+            alpha=float(z[6]), q=dict(zip(COORDS, map(float, z[:6]))),
+            loop=int(np.argmin(np.abs(dets) / scale)) + 1, side=side,
+            residual=float(np.linalg.norm(f[:6]) * float(mechanism.length_scale(p))), det=float(f[6]),
+        ))
+    return out[0], out[1]
+
+
+# --------------------------------------------------------------------------- drawing
+def _drawing(p):
+    return {
+        # crank, coupler, flap arm, bar BD, bar DGE (straight through G), link EH, flap arm FH
+        "links": [("O", "A"), ("A", "G"), ("C", "G"), ("B", "D"), ("D", "G"), ("G", "E"), ("E", "H"), ("F", "H")],
+        "ground": ["O", "C", "B"],
+        # E rides in a rail in the prototype (§1), but the model does not constrain it: its
+        # path is the trace of E.
+        "slots": [],
+        "chords": [("C", "F"), ("F", "L")],
+        "trace": ["E", "L"],
+    }
+
+
+SCENE = Scene(
+    name="flap_msd",
+    summary="MSD double flap (PoliMi report): crank 275-320 deg at 1 rad/s, second flap turns 60.6 deg",
+    mechanism=mechanism,
+    defaults=DEFAULTS,
+    guess=lambda p: closed_form_positions(p, ALPHA_START),
+    stroke=lambda p: (ALPHA_START, ALPHA_END),
+    speed=1.0,
+    units={"alpha": "rad", **{n: "rad" for n in COORDS}},
+    outputs=_outputs,
+    validate=_validate,
+    drawing=_drawing,
+    document="/work/shared/seeds/000_0e5ea70f9886b82a.txt; corrections in docs/seeds/flap_msd.md",
+)
