@@ -50,7 +50,7 @@ class SolverOptions:
       argument is float32); ``None`` follows the arguments.
     """
 
-    max_steps: int = 40
+    max_steps: int = 80
     xtol: float | None = None
     ftol: float | None = None
     cond_max: float | None = None
@@ -450,11 +450,25 @@ def _stroke_one(mech: Mechanism, options: SolverOptions, n_anchors: int, us, p, 
     def predict(q, t, u_from, u_to):
         return q + t @ (u_to - u_from)
 
+    # The stroke's branch is its first guess's.  A large step can carry the predictor across
+    # the branch boundary, where Newton then converges (per its own guess) on the other
+    # branch; so every anchor and every point is checked against the stroke's branch.
+    if mech.branch is not None:
+        b0 = jnp.sign(mech.branch_value(stop(guess), us[0], ps))
+
+        def on_branch(q, u):
+            return (b0 == 0) | (jnp.sign(mech.branch_value(q, u, ps)) == b0)
+    else:
+
+        def on_branch(q, u):
+            return jnp.asarray(True)
+
     def scan_fn(carry, u_next):
         q, t, u_prev = carry
         g = predict(q, t, u_prev, u_next)
+        g = jnp.where(on_branch(g, u_next), g, q)  # a predictor off the branch: fall back to q
         qn, status, *_ = _newton(mech, options, stop(u_next), ps, g)
-        good = status == Status.CONVERGED
+        good = (status == Status.CONVERGED) & on_branch(qn, u_next)
         tn = _tangent(mech, jnp.where(good, qn, q), u_next, ps)
         tn = jnp.where(good & jnp.all(jnp.isfinite(tn)), tn, t)
         # After a failure keep the last good anchor: later anchors restart from it.
@@ -472,8 +486,16 @@ def _stroke_one(mech: Mechanism, options: SolverOptions, n_anchors: int, us, p, 
     nearest = np.clip(np.round(np.arange(n) / k).astype(int), 0, len(idx) - 1)
     # Points are re-solved below; the anchor arrays only give their guesses.
     guesses = jax.vmap(predict)(qa[nearest], ta[nearest], uaa[nearest], us)
+    guesses = jnp.where(jax.vmap(on_branch)(guesses, us)[:, None], guesses, qa[nearest])
     guesses = guesses.at[0].set(stop(guess))
-    return jax.vmap(lambda u_, g_: solve_one(mech, u_, p, g_, options))(us, guesses)
+    sol = jax.vmap(lambda u_, g_: solve_one(mech, u_, p, g_, options))(us, guesses)
+    # Converged, but on the other branch than the stroke's: BRANCH, positions NaN.
+    flipped = (sol.status == Status.CONVERGED) & ~jax.vmap(on_branch)(stop(sol.q), us)
+    return dataclasses.replace(
+        sol,
+        q=jnp.where(flipped[:, None], jnp.nan, sol.q),
+        status=jnp.where(flipped, Status.BRANCH, sol.status).astype(sol.status.dtype),
+    )
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))

@@ -240,15 +240,13 @@ def test_failed_samples_are_nan_and_isolated():
 
 # ----------------------------------------------------------------------------- derivatives
 def test_check_grads_second_order_fwd_and_rev():
-    p = dict(a=1.0, b=3.0, c=2.5, d=3.5)
     g = jnp.array([0.7, 1.7])
 
-    def f(u, a, b, c, d):
-        return jm.solve(FB, u, dict(a=a, b=b, c=c, d=d), g).q
+    def f(u, a, d):
+        return jm.solve(FB, u, dict(a=a, b=3.0, c=2.5, d=d), g).q
 
-    check_grads(f, (0.5, 1.0, 3.0, 2.5, 3.5), order=2, modes=("fwd", "rev"))
+    check_grads(f, (0.5, 1.0, 3.5), order=2, modes=("fwd", "rev"))
     check_grads(lambda u, e: jm.solve(SC, u, dict(a=0.1, b=0.35, e=e), jnp.array([0.1, 0.44])).q, (0.4, 0.03), order=2, modes=("fwd", "rev"))
-    _ = p
 
 
 def test_parameter_derivatives_match_finite_differences():
@@ -261,13 +259,15 @@ def test_parameter_derivatives_match_finite_differences():
     for mech, u, p, g in cases:
         sol = jm.solve(mech, u, p, g)
         assert int(sol.status) == jm.Status.CONVERGED
+        pj = {k: jnp.asarray(v) for k, v in p.items()}
+        q_of_p = lambda pp: jm.solve(mech, u, pp, sol.q).q  # noqa: E731
+        auto = jax.jacfwd(q_of_p)(pj)
+        rev = jax.jacrev(q_of_p)(pj)
         for name in p:
-            auto = jax.jacfwd(lambda x: jm.solve(mech, u, dict(p, **{name: x}), sol.q).q)(p[name])
-            rev = jax.jacrev(lambda x: jm.solve(mech, u, dict(p, **{name: x}), sol.q).q)(p[name])
-            fd = central_diff(lambda x: jm.solve(mech, u, dict(p, **{name: x}), sol.q).q, p[name], h=1e-3)
+            fd = central_diff(lambda x: q_of_p(dict(pj, **{name: x})), p[name], h=1e-3)
             scale = np.maximum(np.abs(fd), 1e-2)
-            assert np.max(np.abs(np.asarray(auto) - fd) / scale) < 1e-8, (mech.name, name)
-            np.testing.assert_allclose(rev, auto, rtol=1e-12, atol=1e-14)
+            assert np.max(np.abs(np.asarray(auto[name]) - fd) / scale) < 1e-8, (mech.name, name)
+            np.testing.assert_allclose(rev[name], auto[name], rtol=1e-12, atol=1e-14)
 
 
 def test_derivatives_not_through_iterations_root_guess():
