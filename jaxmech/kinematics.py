@@ -146,14 +146,15 @@ class Motion:
 
 def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q):
     ok = jnp.all(jnp.isfinite(q))
-    root = _root_fn(mech, q, ok, p)
 
     def u_of_t(t_):
         return jnp.reshape(drive(t_), (mech.dof,))
 
     u, ud, udd = time_derivatives(u_of_t, t)
-    _, qd, qdd = time_derivatives(lambda t_: root(u_of_t(t_)), t)
     d1, d2 = input_derivatives(mech, q, u, p)
+    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
+    qd = d1 @ ud
+    qdd = d1 @ udd + jnp.einsum("ijk,j,k->i", d2, ud, ud)
     # Points need no further implicit derivatives: along the exact second-order path
     # (q + qd s + qdd s^2/2, u + ud s + udd s^2/2) their first two s-derivatives at s = 0
     # are the true velocity and acceleration.
