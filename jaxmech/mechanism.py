@@ -106,6 +106,10 @@ class Mechanism:
     - `points`: optional ``{name: fn(q, u, p) -> complex}`` points of interest (m).
     - `branch`: optional ``fn(q, u, p) -> real`` whose sign identifies the assembly mode
       (for example a cross product).  A solve reports when the sign changed.
+    - `residual_scale`: optional ``fn(p) -> scalar or (m,)`` in the residual's own units.
+      Loop closures are in metres and need none (the length scale is used); equations in
+      other units (a moment balance in N m) give theirs here so that the residual tolerance
+      means the same relative accuracy.
     - `name`: for messages.
     """
 
@@ -117,6 +121,7 @@ class Mechanism:
     signed: Sequence[str] = ()
     points: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
     branch: Callable | None = None
+    residual_scale: Callable | None = None
     name: str = "mechanism"
 
     def __post_init__(self):
@@ -223,6 +228,15 @@ class Mechanism:
         for v in vals[1:]:
             scale = jnp.maximum(scale, v)
         return jnp.where(scale > 0, scale, 1.0)
+
+    def residual_scales(self, p: Mapping, dtype):
+        """Per-equation residual scale ``(m,)``: ``residual_scale(p)`` or the length scale."""
+        if self.residual_scale is None:
+            scale = self.length_scale(p)
+        else:
+            scale = jnp.abs(jnp.asarray(self.residual_scale(self.vars_p(p))))
+            scale = jnp.where(scale > 0, scale, 1.0)
+        return jnp.broadcast_to(jnp.asarray(scale, dtype), (self.m,))
 
     # ------------------------------------------------------------------ checking
     def check_params(self, p: Mapping) -> None:

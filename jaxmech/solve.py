@@ -67,7 +67,7 @@ class Solution:
     - `q`: dependent coordinates, ``(..., m)``; NaN where the status is not ``CONVERGED``.
     - `status`: ``(...)`` int32 ``Status`` codes.
     - `steps`: iterations used.
-    - `residual`: final ``|Phi|_2`` divided by the design's length scale (dimensionless).
+    - `residual`: final ``|Phi / R|_2``, R the residual scale (the length scale for loops).
     - `cond`: 1-norm condition number of the scaled constraint Jacobian ``Phi_q``.
     - `branch`: the mechanism's branch indicator at the solution (NaN if none defined).
     - `coords`: coordinate names (static).
@@ -141,20 +141,22 @@ def _newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     """Damped Newton / Levenberg-Marquardt for one sample.  Returns raw (q, status, ...).
 
     Work is in scaled variables: ``z = q / s`` with ``s`` = 1 for angles and the design's
-    length scale ``L`` for lengths, residual ``Phi / L``.  A full Newton step is tried
+    length scale ``L`` for lengths, residual ``Phi / R`` (``R = L`` for loop closures, or
+    the mechanism's ``residual_scale``).  A full Newton step is tried
     first; when it does not lower ``|Phi|`` the step is regularised (LM parameter ``mu``),
     which makes far-off guesses safe without costing the quadratic convergence near a root.
     """
     dtype = guess.dtype
     xtol, ftol, cond_max = _tolerances(opts, dtype)
     L = mech.length_scale(p).astype(dtype)
+    R = mech.residual_scales(p, dtype)  # residual units per equation (L for loop closures)
     s = jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
     m = mech.m
     eye = jnp.eye(m, dtype=dtype)
 
     def evaluate(q):
         def f(q_):
-            r = mech.residual(q_, u, p) / L
+            r = mech.residual(q_, u, p) / R
             return r, r
 
         j, r = jax.jacfwd(f, has_aux=True)(q)

@@ -50,12 +50,14 @@ physically consistent law).  The report's linear-angle law, theta = theta1 + (pi
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..kinematics import ConstantSpeed, Motion, motion
+from ..kinematics import ConstantSpeed, Motion, input_derivatives, motion
 from ..mechanism import Mechanism, cis
 from ..solve import Solution, SolverOptions, solve
 from .base import Scene
@@ -204,11 +206,16 @@ gear_by_angle = Mechanism(
 
 
 def _default_params() -> dict:
-    sol = design()
-    return {"d": float(sol["d"]), "h": float(sol["h"]), "x1": X1, "x2": X2, "AB": 2.5 * FT, "beta": 0.0}
+    # With the arm perpendicular to the cylinder at x1 (h^2 = d^2 + x1^2) and 90 degrees of
+    # rotation, x2^2 = d^2 + h^2 + 2 d x1 gives 2 d^2 + 2 x1 d + x1^2 - x2^2 = 0.  Evaluated
+    # in numpy (float64 whatever JAX's mode) and without compiling anything at import;
+    # ``design()`` recovers the same numbers as an engine solve (tests/seeds/test_landing_gear.py).
+    d = 0.5 * (-X1 + np.sqrt(2.0 * X2**2 - X1**2))
+    h = float(np.hypot(d, X1))
+    return {"d": float(d), "h": h, "x1": X1, "x2": X2, "AB": 2.5 * FT, "beta": 0.0}
 
 
-#: Default parameters (m, rad): ``d``, ``h`` come from ``design()`` (engine solve at import).
+#: Default parameters (m, rad): ``d``, ``h`` from the right-angle design closed form.
 DEFAULTS = _default_params()
 
 
@@ -234,14 +241,35 @@ def constant_speed_motion(p: Mapping, t, v=SPEED, *, points=None) -> Motion:
     return motion(mechanism, ConstantSpeed(jnp.asarray(p["x1"]), jnp.asarray(v)), t, dict(p), g, points=points)
 
 
-def linear_angle_motion(p: Mapping, t, omega=DTHETA / T_RETRACT, *, points=()) -> Motion:
-    """Motion under the report's linear-angle law (eq. 3): ``theta = theta1 + omega t``, with
-    ``omega = pi/6`` rad/s.  ``Motion.q`` holds ``x`` (m) and ``phi``.  ``x_dot`` is not
-    constant, which contradicts eq. 2.  `points`: named points to differentiate too (none
-    by default)."""
-    theta1 = gear_angle(p, p["x1"])["theta"]
-    g = jnp.stack([jnp.asarray(p["x1"]), _guess(p, p["x1"])[1]])
-    return motion(gear_by_angle, ConstantSpeed(theta1, jnp.asarray(omega)), t, dict(p), g, points=points)
+def linear_angle_motion(p: Mapping, t, omega=DTHETA / T_RETRACT) -> Motion:
+    """Motion under the report's linear-angle law (eq. 3): ``theta = theta1 + omega t`` with
+    ``omega = pi/6`` rad/s, theta1 solved at ``x1``.
+
+    ``Motion.q`` holds ``x`` (m) and ``phi``.  Each time is an independent engine solve of
+    ``gear_by_angle``.  The derivatives are ``q_dot = q' omega`` and ``q_ddot = q'' omega^2``,
+    with ``q'`` and ``q''`` from the implicit function theorem.  ``x_dot`` is not constant,
+    which contradicts eq. 2.  ``points`` is left empty.
+    """
+    t = jnp.asarray(t)
+    theta1 = gear_angle(p, jnp.array([p["x1"], p["x2"]]))["theta"][0]
+    th = theta1 + omega * t
+    d, h = jnp.asarray(p["d"]), jnp.asarray(p["h"])
+    x_guess = jnp.sqrt(d * d + h * h - 2 * d * h * jnp.cos(th))  # eq. 4: only picks the branch
+    guess = jnp.stack([x_guess, jnp.angle(h - d * cis(-th))], axis=-1)
+    sol = solve(gear_by_angle, th, dict(p), guess)
+    pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
+    d1, d2 = _derivatives(gear_by_angle, sol.q, th[:, None], pj)
+    w = jnp.full_like(th, omega)[:, None]
+    return Motion(
+        t=t, u=th[:, None], u_dot=w, u_ddot=jnp.zeros_like(w), q=sol.q, q_dot=d1[..., 0] * w,
+        q_ddot=d2[..., 0, 0] * w * w, dq_du=d1, d2q_du2=d2, points={}, status=sol.status,
+        coords=gear_by_angle.coords, inputs=gear_by_angle.inputs,
+    )
+
+
+@functools.partial(jax.jit, static_argnums=(0,))
+def _derivatives(mech, q, u, p):
+    return jax.vmap(lambda q_, u_: input_derivatives(mech, q_, u_, p))(q, u)
 
 
 def retraction_time(p: Mapping, v=SPEED):
