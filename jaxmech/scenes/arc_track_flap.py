@@ -39,6 +39,22 @@ eqs. (3.4.11) and (3.4.15) have scalar sign slips; Table 2 shades alpha2 as an i
 typos (``sin a0``, ``x_A`` for ``x_A_dot``, Excel's ``ATAN2(x; y)``); landing moments
 are interpolated in ``s34``.
 
+**Parameters** (SI, the thesis's names): ``a1`` |A0 B0|, ``a2`` |A0 A|, ``a3`` screw
+length, ``alpha0`` angle x-A0-B0, ``b1 > c1`` slot radii (pins F, G), ``beta1`` angle of
+F's slot start, ``beta2`` angle F-A0-G, ``beta3`` arc angle = flap rotation, ``x_D``,
+``y_D`` centre of mass (flap closed), ``m_flap``, ``g``, screw ``r`` (mean radius), ``l``
+(lead), ``f`` (friction); ``n_jacks`` (2), ``weight_share`` (1: the thesis's reading),
+``M12_i``, ``M12_f`` whole-flap air moment at the closed / deployed flap.  Default drive:
+nut at 35 mm/s from ``s34_i`` to ``s34_f = s34_i + 2 a2 sin(beta3/2)``.
+
+**API.**  ``SCENE`` (cruise), ``LANDING_SCENE`` / ``scene_for(scenario)``, ``params(scenario,
+**overrides)``; from the command line ``jaxmech run arc_track_flap --set M12_i=220 --set
+M12_f=650`` is the landing case.  ``design(**inputs)`` (Chapter 4: inputs -> parameters),
+``geometry(p)``, ``validate(p, s34=None)`` (Section 5.3's red cells), ``forces(p, s34)``,
+``quasi_static(q, u, p)``, ``screw_torques(L, p)``, ``air_moment(s34, p)``,
+``accelerations(p)``, ``fairing_depth(p)``, ``table2(p)``, ``table3(p)``; ``MECHANISM``,
+``MODEL`` (``jaxmech.dynamics``), ``SCREW`` (``jaxmech.actuators.ScrewJack``).
+
 Units: SI throughout (m, rad, N, N m, kg, s).
 """
 
@@ -293,8 +309,6 @@ MECHANISM = Mechanism(
         "D": _pt_D,
         "G": _pt_G,
         "F": _pt_F,
-        "Ai": _fixed(lambda p: geometry(p)["A_i"]),
-        "Af": _fixed(lambda p: geometry(p)["A_f"]),
     },
     # theta13 in (0, pi): A is CCW of B0 seen from A0 (the thesis's assembly).
     branch=lambda q, u, p: jnp.sin(q.theta13),
@@ -519,19 +533,28 @@ def table3(p: Mapping | None = None) -> dict:
 
 # --------------------------------------------------------------------------- scenes
 def _drawing(p):
+    """Drawing spec (``jaxmech.plot``): screw B0-B with the nut's line, the flap plate
+    A-F-G-D, both arc slots about A0 (the arcs their pins sweep), the chord A_i A_f of the
+    design method (fixed points), traced A and D, transmission angle at A (A0-A-B0)."""
+    pn = {k: np.asarray(p[k], float) for k in _PARAMS}
+    g = geometry(pn)
     return {
-        "links": [("B0", "B"), ("A", "G"), ("G", "F"), ("F", "D"), ("D", "A")],
+        "links": [("B0", "B"), ("A", "F"), ("F", "G"), ("G", "D"), ("D", "A")],
         "ground": ["A0", "B0"],
-        "slots": [{"centre": "A0", "radius": float(p["b1"])}, {"centre": "A0", "radius": float(p["c1"])},
+        "slots": [{"centre": "A0", "radius": float(pn["b1"]), "pin": "F"},
+                  {"centre": "A0", "radius": float(pn["c1"]), "pin": "G"},
                   {"line": ("B0", "B")}],
-        "chords": [("Ai", "Af")],
-        "trace": ["A", "D", "G", "F"],
+        "chords": [(complex(g["A_i"]), complex(g["A_f"]))],
+        "polygons": [("A", "F", "G", "D")],
+        "trace": ["A", "D"],
+        "transmission": ("A0", "A", "B0"),
     }
 
 
 def _stroke(p):
-    s34_i, s34_f, _ = _stroke_ends(p, np)
-    return float(s34_i), float(s34_f)
+    """(s34_i, s34_f) in m; traceable (sweeps call it under jit)."""
+    s34_i, s34_f, _ = _stroke_ends(p)
+    return s34_i, s34_f
 
 
 @functools.cache
