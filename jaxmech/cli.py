@@ -140,7 +140,7 @@ def _parser() -> _Parser:
     r = sub.add_parser(
         "run",
         help="run a scene over its stroke: CSV, PNG plots, summary",
-        description="Run SCENE over its stroke and write OUT/SCENE.csv (one row per input, columns NAME[UNIT]) "
+        description="Run SCENE over its stroke and write DIR/SCENE.csv (one row per input, columns NAME[UNIT]) "
         "and the scene's plots as PNG; print the summary table.",
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
@@ -173,7 +173,7 @@ def _parser() -> _Parser:
     rep = sub.add_parser(
         "report",
         help="run every scene (CSV, plots, summary) into one folder",
-        description="Run every available scene (or those named) into OUT/SCENE/: CSV, PNG plots; write OUT/README.md "
+        description="Run every available scene (or those named) into DIR/SCENE/: CSV, PNG plots; write DIR/README.md "
         "with every summary and plot, and print the summaries.",
     )
     rep.add_argument("--out", default="jaxmech-report", metavar="DIR", help="output folder (default ./jaxmech-report)")
@@ -244,8 +244,7 @@ def _cmd_scenes(args) -> int:
 
 def _cmd_run(args) -> int:
     scene = _scene(args.scene)
-    overrides = _parse_set(args.sets)
-    result = _run(scene, args.points, overrides)
+    result = _run(scene, args.points, args.overrides)
     paths = _write_run(result, Path(args.out))
     print(result.summary())
     for path in paths:
@@ -257,11 +256,8 @@ def _cmd_animate(args) -> int:
     from .plot import animate
 
     scene = _scene(args.scene)
-    overrides = _parse_set(args.sets)
     out = Path(args.out) if args.out else Path(f"{scene.name}.gif")
-    if out.suffix.lower() not in (".gif", ".html"):
-        raise UsageError(f"--out must end in .gif or .html, got {str(out)!r}")
-    result = _run(scene, max(101, args.frames), overrides)
+    result = _run(scene, max(101, args.frames), args.overrides)
     anim = animate(result, out, frames=args.frames, fps=args.fps)
     print(f"wrote {out} ({len(anim.frame_indices)} frames)")
     return 0
@@ -269,9 +265,7 @@ def _cmd_animate(args) -> int:
 
 def _cmd_sweep(args) -> int:
     scene = _scene(args.scene)
-    grid = _parse_grid(args.grid)
-    if not grid:
-        raise UsageError("sweep needs at least one --grid NAME=START:STOP:N")
+    grid = args.grid_values
     unknown = [n for n in grid if n not in scene.defaults]
     if unknown:
         raise UsageError(f"scene {scene.name!r} has no parameter(s) {unknown}; its parameters are: {', '.join(scene.defaults)}")
@@ -337,6 +331,13 @@ def main(argv=None) -> int:
     report failed, 2 a usage error: unknown scene or parameter, bad value, unassemblable design)."""
     try:
         args = _parser().parse_args(argv)
+        # Syntax first (no JAX touched for a mistyped command line), then float64 and the cache.
+        args.overrides = _parse_set(getattr(args, "sets", None))
+        args.grid_values = _parse_grid(getattr(args, "grid", None))
+        if args.verb == "sweep" and not args.grid_values:
+            raise UsageError("sweep needs at least one --grid NAME=START:STOP:N")
+        if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".html"):
+            raise UsageError(f"--out must end in .gif or .html, got {args.out!r}")
         _setup_jax()
         return _VERBS[args.verb](args)
     except UsageError as e:

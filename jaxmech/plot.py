@@ -390,7 +390,9 @@ def find_toggles(
 
     **Arguments**
 
-    - `output`: the output coordinate or point (see ``mechanical_advantage``).
+    - `output`: the output coordinate or point (see ``mechanical_advantage``).  For a
+      point only ``|dP/du|`` is known, which does not change sign: its limit positions
+      are found only where a sample hits zero exactly; prefer a coordinate.
     - `transmission`: ``(a, joint, b)``; default the drawing spec's (none: not checked).
     - `angle_tol`: a transmission angle within this of 0 or pi counts (rad).
     - `blowup`: ``|dq_out/du|`` above this many times its median counts as unbounded.

@@ -1,0 +1,196 @@
+"""The ``jaxmech`` command, run as a user runs it (``python -m jaxmech.cli``), every verb and
+the user's mistakes: one line on stderr, exit status 2, never a traceback."""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import csv  # noqa: E402
+import math  # noqa: E402
+import os  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from jaxmech.cli import main  # noqa: E402
+from jaxmech.scenes import scene_names  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+# Compiled kernels are cached between the subprocesses (and between test sessions: the
+# cache is keyed by the program, so a stale entry is never used); kept out of the home.
+CACHE = Path(tempfile.gettempdir()) / "jaxmech-test-xla-cache"
+FOURBAR_COLUMNS = [
+    "t[s]", "theta2[rad]", "theta2_dot[rad/s]", "theta2_ddot[rad/s^2]",
+    "theta3[rad]", "theta3_dot[rad/s]", "theta3_ddot[rad/s^2]",
+    "theta4[rad]", "theta4_dot[rad/s]", "theta4_ddot[rad/s^2]",
+    "transmission_angle[rad]", "status[-]",
+]  # fmt: skip
+N = 101  # the default --points: every run below shares one compiled kernel
+POS_TOL = 1e-12  # rad
+
+
+def jaxmech(*args, cwd=None, timeout=300):
+    env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(CACHE), "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-m", "jaxmech.cli", *map(str, args)],
+        capture_output=True, text=True, cwd=cwd, env=env, timeout=timeout,
+    )  # fmt: skip
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    return rows[0], np.array(rows[1:], dtype=float)
+
+
+def theta4_at_zero(a, b, c, d):
+    """Open four-bar at theta2 = 0: triangle A(a, 0), O4(d, 0), B; law of cosines at O4."""
+    f = d - a
+    return math.pi - math.acos((c * c + f * f - b * b) / (2 * c * f))
+
+
+def assert_user_error(proc, match):
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("jaxmech: error: ")
+    assert match in lines[0]
+
+
+# ----------------------------------------------------------------------- help and listing
+def test_scenes_one_line_each():
+    proc = jaxmech("scenes")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    assert [ln.split()[0] for ln in lines] == scene_names()
+    assert "four-bar" in lines[0]
+
+
+@pytest.mark.parametrize("verb", ["scenes", "run", "animate", "sweep", "report"])
+def test_help_on_every_verb(verb, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([verb, "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: jaxmech {verb}")
+
+
+def test_top_level_help_as_a_command():
+    proc = jaxmech("--help")
+    assert proc.returncode == 0
+    for verb in ("scenes", "run", "animate", "sweep", "report"):
+        assert verb in proc.stdout
+
+
+# ----------------------------------------------------------------------- run
+def test_run_writes_csv_plots_and_summary(tmp_path):
+    proc = jaxmech("run", "fourbar", "--set", "d=3.4", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    head, data = read_csv(tmp_path / "fourbar.csv")
+    assert head == FOURBAR_COLUMNS
+    assert data.shape == (N, len(FOURBAR_COLUMNS))
+    np.testing.assert_allclose(data[:, 1], np.linspace(0, 2 * np.pi, N), atol=1e-15)
+    assert np.all(data[:, -1] == 0)  # every position converged
+    theta4 = data[0, FOURBAR_COLUMNS.index("theta4[rad]")]
+    assert abs(theta4 - theta4_at_zero(1.0, 3.0, 2.5, 3.4)) < POS_TOL  # --set d=3.4 was used
+    for kind in ("coordinates", "velocities", "accelerations", "outputs", "transmission", "poses"):
+        with Image.open(tmp_path / f"fourbar_{kind}.png") as im:
+            assert im.format == "PNG"
+    assert "scene fourbar" in proc.stdout and "status: {'CONVERGED': 101}" in proc.stdout
+    assert f"wrote {tmp_path / 'fourbar.csv'}" in proc.stdout
+
+
+ERRORS = {
+    "unknown scene": (["run", "fivebar"], "unknown scene 'fivebar'"),
+    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter(s) ['e']"),
+    "bad value": (["run", "fourbar", "--set", "a=one"], "'one' is not a number"),
+    "negative length": (["run", "fourbar", "--set", "a=-1"], "length 'a' must be positive"),
+    "bad grid syntax": (["sweep", "fourbar", "--grid", "a=1:2"], "--grid expects NAME=START:STOP:N"),
+    "unknown grid parameter": (["sweep", "fourbar", "--grid", "z=1:2:3"], "has no parameter(s) ['z']"),
+    "animation format": (["animate", "fourbar", "--out", "x.mp4"], "must end in .gif or .html"),
+    "report unknown scene": (["report", "--scenes", "fivebar"], "unknown scene(s) ['fivebar']"),
+}
+
+# Command-line syntax errors are caught before JAX is set up, so they are also checked in
+# process (quicker than a subprocess each).
+SYNTAX_ERRORS = {
+    "not NAME=VALUE": (["run", "fourbar", "--set", "a"], "--set expects NAME=VALUE"),
+    "set twice": (["animate", "fourbar", "--set", "a=1", "--set", "a=2"], "--set a is given twice"),
+    "too few points": (["run", "fourbar", "--points", "1"], "--points must be at least 2"),
+    "no verb": ([], "required"),
+    "unknown verb": (["plot"], "invalid choice"),
+    "bad grid count": (["sweep", "fourbar", "--grid", "a=1:2:x"], "N must be a whole number"),
+    "empty grid": (["sweep", "fourbar", "--grid", "a=1:2:0"], "N must be at least 1"),
+    "no grid": (["sweep", "fourbar"], "at least one --grid"),
+    "bad chunk size": (["sweep", "fourbar", "--grid", "a=1:2:3", "--chunk-size", "0"], "--chunk-size must be at least 1"),
+}
+
+
+@pytest.mark.parametrize("case", list(SYNTAX_ERRORS))
+def test_syntax_errors_in_process(case, capsys):
+    args, match = SYNTAX_ERRORS[case]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("jaxmech: error: ") and match in err[0]
+
+
+@pytest.mark.parametrize("case", list(ERRORS))
+def test_user_errors_are_one_line_exit_2(case, tmp_path):
+    args, match = ERRORS[case]
+    assert_user_error(jaxmech(*args, cwd=tmp_path), match)
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_unassemblable_design_is_a_user_error(tmp_path):
+    proc = jaxmech("run", "fourbar", "--set", "a=10", "--out", tmp_path)
+    assert_user_error(proc, "cannot be assembled")
+    assert not (tmp_path / "fourbar.csv").exists()
+
+
+# ----------------------------------------------------------------------- animate, sweep, report
+def test_animate_gif(tmp_path):
+    out = tmp_path / "fb.gif"
+    proc = jaxmech("animate", "fourbar", "--frames", "5", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    with Image.open(out) as im:
+        assert im.n_frames == 5
+    assert "5 frames" in proc.stdout
+
+
+def test_sweep_writes_one_row_per_design_and_point(tmp_path):
+    out = tmp_path / "sweep.csv"
+    proc = jaxmech("sweep", "fourbar", "--grid", "a=0.9:1.1:2", "--grid", "d=3.4:3.6:2", "--points", N, "--chunk-size", 4, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    head, data = read_csv(out)
+    for col in ("a", "d", *FOURBAR_COLUMNS):
+        assert col in head
+    assert data.shape[0] == 4 * N
+    a, d = data[:, head.index("a")], data[:, head.index("d")]
+    assert sorted({(x, y) for x, y in zip(a, d)}) == [(0.9, 3.4), (0.9, 3.6), (1.1, 3.4), (1.1, 3.6)]
+    start = data[:, head.index("theta2[rad]")] == 0.0
+    assert start.sum() == 4
+    for row in data[start]:
+        expect = theta4_at_zero(row[head.index("a")], 3.0, 2.5, row[head.index("d")])
+        assert abs(row[head.index("theta4[rad]")] - expect) < POS_TOL
+    assert np.all(data[:, head.index("status[-]")] == 0)
+    assert "4 designs" in proc.stdout
+
+
+def test_report_runs_scenes_into_a_folder(tmp_path):
+    proc = jaxmech("report", "--scenes", "fourbar", "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    head, data = read_csv(tmp_path / "fourbar" / "fourbar.csv")
+    assert head == FOURBAR_COLUMNS and data.shape[0] == N
+    readme = (tmp_path / "README.md").read_text()
+    assert "## fourbar" in readme and "status: {'CONVERGED': 101}" in readme
+    images = [ln[ln.index("(") + 1 : -1] for ln in readme.splitlines() if ln.startswith("![")]
+    assert len(images) == 6
+    for rel in images:
+        assert (tmp_path / rel).is_file()
+    assert "scene fourbar" in proc.stdout
