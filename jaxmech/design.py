@@ -23,13 +23,12 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
-import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 
 from .scenes.base import Scene
 from .solve import SolverOptions
@@ -96,6 +95,7 @@ def peak(values, mode: str = "argmax", *, axis: int = -1, where=None, temperatur
             t = jnp.asarray(temperature, values.dtype)
             if not isinstance(temperature, jax.core.Tracer) and np.any(np.asarray(temperature) <= 0):
                 raise ValueError(f"peak: temperature must be positive, got {temperature!r}")
+        t = jnp.broadcast_to(t, hi.shape)
         ref = jnp.where(jnp.isfinite(hi), hi, 0.0)
         z = jnp.where(mask, (values - ref) / t, 0.0)  # mask the inputs: no exp of NaN anywhere
         out = jnp.squeeze(ref, axis) + jnp.squeeze(t, axis) * jax.nn.logsumexp(z, axis=axis, b=mask.astype(values.dtype))
@@ -345,8 +345,8 @@ class FitResult:
     - `params`: ``{name: (S,)}`` each start's final (last feasible) parameters.
     - `value`: ``(S,)`` objective there (``inf`` where even the start was infeasible).
     - `reason`: ``(S,)`` ``StopReason`` codes; `steps`: ``(S,)`` steps taken.
-    - `history`: ``(steps + 1, S)`` objective per step (``inf`` after a start stopped... its
-      last value is repeated).
+    - `history`: ``(steps + 1, S)`` objective after each step (once a start has stopped
+      its last value is repeated; ``inf`` for a start infeasible from the beginning).
     - `best`: index of the winning start (lowest objective among those that neither
       diverged nor were infeasible from the start), ``-1`` if none.
     """
@@ -429,7 +429,8 @@ def fit(
       parameters are clipped into the box.  (A line search may still evaluate outside
       the box; it sees ``inf`` where that is infeasible.)
     - `optimizer`: an ``optax`` transformation; default ``optax.lbfgs()`` (with its zoom
-      line search, which receives the objective as ``value_fn``).
+      line search, which receives the objective as ``value_fn``).  The compiled loop is
+      keyed on the objective and optimizer objects: reuse them to avoid recompiling.
     - `steps`: iteration budget per start.
     - `tol`, `xtol`: a start has converged when one step changes the objective by at most
       ``tol * max(|f|, tiny)`` and every parameter by at most ``xtol * max(|p|, tiny)``.
@@ -441,8 +442,6 @@ def fit(
     **Returns** a ``FitResult``: the winner, each start's final design and stop reason,
     and ``report()`` in words.
     """
-    import optax
-
     batch, s = _as_batch(p0, "fit")
     names = tuple(batch)
     bounds = dict(bounds or {})
@@ -457,8 +456,7 @@ def fit(
         lo[k], hi[k] = float(a), float(b)
     if steps < 1:
         raise ValueError(f"fit: steps must be at least 1, got {steps}")
-    optimizer = optax.lbfgs() if optimizer is None else optimizer
-    opt = optax.with_extra_args_support(optimizer)
+    opt = _default_optimizer() if optimizer is None else optax.with_extra_args_support(optimizer)
     p_start = {k: jnp.clip(v, lo[k], hi[k]) for k, v in batch.items()}
     params, value, reason, nsteps, history = _fit_loop(
         objective, opt, penalty, float(penalty_weight), float(diverge), float(tol), float(xtol), int(steps),
@@ -478,6 +476,12 @@ def fit(
         tol=tol,
         xtol=xtol,
     )
+
+
+@functools.lru_cache(maxsize=1)
+def _default_optimizer():
+    # One object for every call: the compiled fit loop is keyed on the optimizer's identity.
+    return optax.with_extra_args_support(optax.lbfgs())
 
 
 @functools.partial(jax.jit, static_argnums=tuple(range(10)))

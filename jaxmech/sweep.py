@@ -17,11 +17,10 @@ kept, with its status and NaN values; nothing is dropped.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import jax
@@ -123,20 +122,25 @@ def _stroke_drive(scene: Scene, p, dtype):
 def _sample(mech, drive, p, t, q, ok):
     """Kinematics at one solved sample; ``q`` must be finite (a placeholder where not ``ok``).
 
-    Same derivatives as ``kinematics.motion``; the implicit root is attached with the
-    solve's own ``ok`` so that a failed sample has an exactly zero tangent and no NaN
-    anywhere (its values are replaced by NaN afterwards, outside every derivative).
+    The same formulas as ``kinematics.motion`` (chain rule from ``dq/du``, ``d2q/du2``;
+    points along the exact second-order path), but the implicit root is attached with the
+    solve's own ``ok``: a failed sample has exactly zero derivatives and no NaN anywhere
+    (its values are replaced by NaN afterwards, outside every derivative).
     """
     root = lambda u: implicit_root(mech, q, ok, u, p)  # noqa: E731
-    u_of_t = lambda t_: jnp.reshape(drive(t_), (mech.dof,))  # noqa: E731
-    u, ud, udd = time_derivatives(u_of_t, t)
-    _, qd, qdd = time_derivatives(lambda t_: root(u_of_t(t_)), t)
+    u, ud, udd = time_derivatives(lambda t_: jnp.reshape(drive(t_), (mech.dof,)), t)
     d1 = jax.jacfwd(root)(u)
     d2 = jax.jacfwd(jax.jacfwd(root))(u)
-    pts = {
-        name: time_derivatives(lambda t_, name=name: mech.point(name, root(u_of_t(t_)), u_of_t(t_), p), t)
-        for name in mech.points
-    }
+    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
+    qd = d1 @ ud
+    qdd = d1 @ udd + jnp.einsum("ijk,j,k->i", d2, ud, ud)
+    pts = {}
+    for name in mech.points:
+
+        def along(s_, name=name):
+            return mech.point(name, q + qd * s_ + 0.5 * qdd * s_**2, u + ud * s_ + 0.5 * udd * s_**2, p)
+
+        pts[name] = time_derivatives(along, jnp.zeros_like(t))
     return u, ud, udd, qd, qdd, d1, d2, pts
 
 
@@ -264,13 +268,14 @@ def _compiled(scene, points, options, anchors, mode, chunk, param_names):
 
 
 def _bytes_per_design(compiled, chunk: int) -> float:
-    """Device memory per design of a compiled chunk kernel (arguments, outputs, temporaries)."""
+    """Device memory per design of a compiled chunk kernel (arguments, outputs, temporaries),
+    summed over the devices (XLA reports one device's share of a sharded kernel)."""
     try:
         m = compiled.memory_analysis()
         total = m.argument_size_in_bytes + m.output_size_in_bytes + m.temp_size_in_bytes
-    except Exception:  # noqa: BLE001 - not every backend reports; fall back to a loose bound
+    except Exception:  # noqa: BLE001 - not every backend reports one: no budget control then
         return float("nan")
-    return total / chunk
+    return total * jax.device_count() / chunk
 
 
 def _default_budget() -> float:
@@ -297,6 +302,7 @@ def _run_chunk(scene, points, options, anchors, mode, chunk, params: dict[str, n
     """
     names = tuple(params)
     n = len(next(iter(params.values())))
+    chunk = _round_up(max(chunk, n), jax.device_count())  # a Dask worker may have several devices
     compiled, sharding = _compiled(scene, points, options, anchors, mode, chunk, names)
     dtype = jnp.result_type(float)
     padded = {k: np.concatenate([v, np.full(chunk - n, v[0])]).astype(dtype) for k, v in params.items()}
@@ -480,7 +486,8 @@ class _Progress:
             expected = self.total / rate if rate > 0 else 0.0
             if expected < _PROGRESS_AFTER_S or done_designs >= self.total:
                 return
-        if now - self.last < 0.5 and done_designs < self.total:
+        # A terminal line is rewritten in place; a log gets a line every 10 s at most.
+        if now - self.last < (0.5 if self.tty else 10.0) and done_designs < self.total:
             return
         self.last, self.shown = now, True
         left = elapsed * (self.total - done_designs) / max(done_designs, 1)
@@ -611,10 +618,10 @@ def sweep_scene(
     params = _design_table(scene, grid, table)
     d = len(next(iter(params.values())))
     errors = _reject(scene, params)
+    rejected = np.fromiter(errors, dtype=np.int64, count=len(errors))
     run_params = {k: v.copy() for k, v in params.items()}
-    for i in errors:  # run a harmless stand-in; its results are discarded below
-        for k, v in run_params.items():
-            v[i] = float(scene.defaults[k])
+    for k, v in run_params.items():  # run a harmless stand-in; its results are discarded below
+        v[rejected] = float(scene.defaults[k])
     budget = float(memory_budget) if memory_budget is not None else _default_budget()
     progress_bar = _Progress(f"sweep {scene.name}", d, progress)
     t0 = time.perf_counter()
@@ -623,11 +630,9 @@ def sweep_scene(
     else:
         cols, status, chunk_errors, info = _sweep_dask(client, scene, points, options, anchors, run_params, chunk_size, budget, timeout, progress_bar)
     progress_bar.close()
-    for i in errors:
-        status[i] = Status.NONFINITE
-        for k, v in cols.items():
-            if not _drive_column(scene, k):
-                v[i] = np.nan
+    status[rejected] = Status.NONFINITE
+    for v in cols.values():
+        v[rejected] = np.nan
     errors.update({i: m for i, m in chunk_errors.items() if i not in errors})
     info["seconds"] = time.perf_counter() - t0
     return SweepResult(
@@ -771,7 +776,7 @@ def _sweep_dask(client, scene, points, options, anchors, params, chunk_size, bud
             status[s:e] = st
             done += e - s
             progress_bar.update(done, len(finished), len(starts))
-    except (TimeoutError, distributed.TimeoutError):
+    except TimeoutError:  # the remaining chunks are marked lost below
         pass
     for fut, (s, e) in futures.items():
         if fut not in finished:

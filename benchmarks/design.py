@@ -1,0 +1,270 @@
+"""Design sweeps, sensitivities and fits: throughput, memory, and gradients against finite differences.
+
+1. **Sweep throughput** (``jaxmech.sweep.sweep_scene``): the four-bar scene over D random
+   crank-rocker designs x 101 stroke positions (every column of ``SceneResult.table``:
+   positions, velocities, accelerations, transmission angle), D = 1e3 and 1e5 (and 1e6
+   with ``--full``; its results table alone is about 9 GB).  Reported: compile time, run
+   time, designs x positions per second, chunk size, the compiled kernel's device memory
+   per design, the host's peak RSS (``resource.getrusage``) and the peak of host
+   allocations during the run (``tracemalloc``, which numpy reports to).
+2. **Gradient throughput** (``jaxmech.design.sensitivities``): d/dp of the final
+   transmission angle w.r.t. (a, b, c, d) for D designs, against central finite
+   differences of the same figure (2nd order: 2P evaluations; 6th order: 6P evaluations,
+   the one that comes close to the gradient's accuracy).  Errors against the closed-form
+   four-bar differentiated by JAX.
+3. **Design problems** (``--problems`` or ``--full``): multi-start ``design.fit`` (L-BFGS,
+   implicit gradients) against ``scipy.optimize.minimize(method="Nelder-Mead")`` from the
+   same starts on the same objective: time and evaluations to the same objective value.
+   ``DESIGN_PROBLEMS`` is the hook: the four-bar parameter identification is registered
+   here; the flap_msd design problem is to be registered by that scene's author (see
+   ``flap_msd_problem``: it returns ``None`` until the scene exists).
+
+Run: ``python -m benchmarks.design [--quick] [--full] [--problems]``; writes
+``results/design.json``.  The default run takes a few minutes on 2 idle cores.
+"""
+
+from __future__ import annotations
+
+import time
+import tracemalloc
+
+import numpy as np
+
+from benchmarks.common import base_parser, block, peak_rss_mb, setup_jax, time_call, write_result
+from benchmarks.fourbar_reference import closed_form, random_designs
+
+POINTS = 101
+
+
+# --------------------------------------------------------------------------- 1. sweeps
+def bench_sweeps(sizes):
+    from jaxmech.scenes.classic import FOURBAR
+    from jaxmech.sweep import sweep_scene
+
+    rows = []
+    # Compile once (chunk of 1024 designs, the CPU cap; every size below reuses it).
+    t0 = time.perf_counter()
+    warm = sweep_scene(FOURBAR, table=random_designs(1024, seed=99), points=POINTS, progress=False)
+    first_s = time.perf_counter() - t0
+    for d in sizes:
+        designs = random_designs(d, seed=1)
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        res = sweep_scene(FOURBAR, table=designs, points=POINTS, progress=d >= 10**5)
+        run_s = time.perf_counter() - t0
+        _, host_peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        rows.append({
+            "designs": d,
+            "positions": POINTS,
+            "run_s": run_s,
+            "designs_x_positions_per_s": d * POINTS / run_s,
+            "designs_per_s": d / run_s,
+            "chunk_size": res.info["chunk_size"],
+            "n_chunks": res.info["n_chunks"],
+            "devices": res.info["devices"],
+            "kernel_bytes_per_design": res.info["bytes_per_design"],
+            "host_peak_alloc_mb": host_peak / 2**20,
+            "results_mb": sum(v.nbytes for v in res.columns.values()) / 2**20,
+            "peak_rss_mb": peak_rss_mb(),
+            "converged_fraction": float(np.mean(res.status == 0)),
+        })
+        print(f"sweep D={d:>8}: {run_s:8.2f} s, {rows[-1]['designs_x_positions_per_s']:.3g} design-positions/s, "
+              f"host peak {rows[-1]['host_peak_alloc_mb']:.0f} MiB, RSS {rows[-1]['peak_rss_mb']:.0f} MiB", flush=True)
+        del res
+    # The first call compiled and ran 1024 designs; a later call of 1e3 runs the same chunk.
+    compile_s = first_s - rows[0]["run_s"] if rows and rows[0]["designs"] <= 1024 else float("nan")
+    return {"first_call_s": first_s, "compile_s_estimate": compile_s, "rows": rows}
+
+
+# --------------------------------------------------------------------------- 2. gradients
+def bench_gradients(d):
+    import jax
+    import jax.numpy as jnp
+
+    from jaxmech.design import scene_figure, sensitivities
+    from jaxmech.scenes.classic import FOURBAR
+
+    names = ("a", "b", "c", "d")
+
+    def final_transmission(cols, p):
+        return cols["transmission_angle[rad]"][-1]
+
+    fig = scene_figure(FOURBAR, final_transmission, points=POINTS)
+    designs = random_designs(d, seed=2)
+
+    # Truth: the closed form at theta2 = 2 pi, differentiated by JAX.
+    def closed(p):
+        t3, t4, *_ = closed_form(jnp, 2 * jnp.pi, p["a"], p["b"], p["c"], p["d"])
+        return jnp.arccos(jnp.abs(jnp.cos(t4 - t3)))
+
+    exact = jax.vmap(jax.grad(closed))({k: jnp.asarray(v) for k, v in designs.items()})
+
+    t0 = time.perf_counter()
+    s = sensitivities(fig, designs)
+    grad_first = time.perf_counter() - t0
+    grad_t = time_call(lambda: sensitivities(fig, designs).value, repeat=3)
+    grad_err = max(float(np.max(np.abs(s.grad[k] - np.asarray(exact[k])) / np.abs(np.asarray(exact[k])))) for k in names)
+
+    values = jax.jit(jax.vmap(lambda p: fig(p)[0]))
+
+    def fd(order):
+        # Central differences: 2 * P * (order / 2) perturbed copies of the D designs, each
+        # evaluated as one batch of D (the gradient's batch size).
+        if order == 2:
+            steps, weights, rel = [1], [0.5], 1e-5  # f' = (f(p + h) - f(p - h)) / 2h
+        else:
+            steps, weights, rel = [1, 2, 3], [45 / 60, -9 / 60, 1 / 60], 1e-3  # 6th-order stencil
+        batches = []
+        for k in names:
+            for sgn in (1, -1):
+                for m in steps:
+                    batches.append({j: jnp.asarray(designs[j] * (1 + sgn * m * rel) if j == k else designs[j]) for j in names})
+        return batches, steps, weights, rel
+
+    def run_all(batches):
+        return [values(b) for b in batches]
+
+    rows = {}
+    for order in (2, 6):
+        batches, steps, weights, rel = fd(order)
+        t0 = time.perf_counter()
+        out = np.asarray(block(run_all(batches)))
+        first = time.perf_counter() - t0
+        tm = time_call(run_all, batches, repeat=3)
+        out = out.reshape(len(names), 2, len(steps), d)
+        errs = []
+        for i, k in enumerate(names):
+            h = designs[k] * rel
+            g = sum(w * (out[i, 0, j] - out[i, 1, j]) for j, w in enumerate(weights)) / h
+            errs.append(float(np.max(np.abs(g - np.asarray(exact[k])) / np.abs(np.asarray(exact[k])))))
+        rows[f"central_fd_order{order}"] = {
+            "evaluations_per_design": 2 * len(names) * len(steps),
+            "run_s": tm["median_s"],
+            "first_call_s": first,
+            "max_rel_error": max(errs),
+            "gradients_per_s": d / tm["median_s"],
+        }
+    rows["implicit_gradient"] = {
+        "run_s": grad_t["median_s"],
+        "first_call_s": grad_first,
+        "max_rel_error": grad_err,
+        "gradients_per_s": d / grad_t["median_s"],
+    }
+    for k, r in rows.items():
+        print(f"gradient {k:>20}: {r['run_s']:.3f} s for {d} designs, max rel error {r['max_rel_error']:.2e}", flush=True)
+    return {
+        "designs": d,
+        "parameters": list(names),
+        "figure": "final transmission angle (rad) of the four-bar scene, 101 points",
+        "truth": "closed-form four-bar at theta2 = 2 pi, differentiated by JAX",
+        "rows": rows,
+        "speedup_vs_fd_order6": rows["central_fd_order6"]["run_s"] / rows["implicit_gradient"]["run_s"],
+        "speedup_vs_fd_order2": rows["central_fd_order2"]["run_s"] / rows["implicit_gradient"]["run_s"],
+    }
+
+
+# --------------------------------------------------------------------------- 3. design problems
+def fourbar_identification_problem():
+    """Identify (b, c) of the four-bar from 101 noisy rocker angles (sigma = 1 mrad)."""
+    import jax.numpy as jnp
+
+    from jaxmech.design import scene_figure
+    from jaxmech.scenes import run_scene
+    from jaxmech.scenes.classic import FOURBAR
+
+    sigma = 1e-3
+    rng = np.random.default_rng(7)
+    data = run_scene(FOURBAR, points=POINTS, b=3.0, c=2.5).table()["theta4[rad]"] + sigma * rng.standard_normal(POINTS)
+
+    def chi2(cols, p):
+        return 0.5 * jnp.sum(jnp.square((cols["theta4[rad]"] - data) / sigma))
+
+    return {
+        "name": "fourbar_identification",
+        "objective": scene_figure(FOURBAR, chi2, points=POINTS),
+        "starts": {"b": np.array([2.8, 3.2, 2.9, 3.1]), "c": np.array([2.2, 2.8, 3.4, 2.4])},
+        "bounds": {"b": (2.0, 4.0), "c": (1.6, 4.0)},
+    }
+
+
+def flap_msd_problem():
+    """Hook for the flap_msd design problem (issue 5): return the same dict as
+    ``fourbar_identification_problem`` (name, objective figure, starts, bounds) once the
+    ``flap_msd`` scene exists; ``None`` until then."""
+    from jaxmech.scenes import scene_names
+
+    if "flap_msd" not in scene_names():
+        return None
+    return None  # TODO(flap_msd author): objective = scene_figure(get_scene("flap_msd"), ...)
+
+
+DESIGN_PROBLEMS = [fourbar_identification_problem, flap_msd_problem]
+
+
+def bench_problem(problem):
+    import jax
+    import optax
+    from scipy.optimize import minimize
+
+    from jaxmech.design import fit
+
+    objective, starts, bounds = problem["objective"], problem["starts"], problem["bounds"]
+    names = list(starts)
+    opt = optax.lbfgs()  # one object: a second fit with it reuses the compiled loop
+    t0 = time.perf_counter()
+    res = fit(objective, starts, bounds=bounds, optimizer=opt, steps=200)
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    res = fit(objective, starts, bounds=bounds, optimizer=opt, steps=200)
+    fit_s = time.perf_counter() - t0
+    target = float(res.value[res.best])
+
+    value = jax.jit(lambda p: objective(p)[0])
+    value({k: float(v[0]) for k, v in starts.items()})  # compile
+    nm_rows = []
+    t0 = time.perf_counter()
+    for i in range(len(starts[names[0]])):
+        x0 = [float(starts[k][i]) for k in names]
+        r = minimize(lambda x: float(value(dict(zip(names, x)))), x0, method="Nelder-Mead",
+                     bounds=[bounds[k] for k in names], options={"xatol": 1e-10, "fatol": 1e-10, "maxfev": 4000})
+        nm_rows.append({"value": float(r.fun), "evaluations": int(r.nfev)})
+    nm_s = time.perf_counter() - t0
+    nm_best = min(r["value"] for r in nm_rows)
+    row = {
+        "problem": problem["name"],
+        "starts": len(starts[names[0]]),
+        "fit_lbfgs": {"first_call_s_with_compile": first, "run_s": fit_s, "best_value": target, "steps": res.steps.tolist(),
+                      "reasons": [res.message(i) for i in range(len(res.value))]},
+        "nelder_mead": {"run_s": nm_s, "best_value": nm_best, "rows": nm_rows},
+        "speedup_run": nm_s / fit_s,
+    }
+    print(f"problem {problem['name']}: fit {fit_s:.2f} s (f = {target:.10g}), Nelder-Mead {nm_s:.2f} s (f = {nm_best:.10g})", flush=True)
+    return row
+
+
+def main(argv=None):
+    ap = base_parser("Design sweeps and sensitivities: throughput, memory, gradients vs finite differences.")
+    ap.add_argument("--full", action="store_true", help="also 1e6 designs and the design problems")
+    ap.add_argument("--problems", action="store_true", help="time the registered design problems (fit vs Nelder-Mead)")
+    args = ap.parse_args(argv)
+    setup_jax()
+    sizes = [10**3] if args.quick else [10**3, 10**5] + ([10**6] if args.full else [])
+    t0 = time.perf_counter()
+    payload = {"points": POINTS, "sweep": bench_sweeps(sizes)}
+    payload["gradients"] = bench_gradients(64 if args.quick else 256)
+    problems = []
+    if args.problems or args.full:
+        for make in DESIGN_PROBLEMS:
+            prob = make()
+            problems.append(bench_problem(prob) if prob is not None else {"problem": make.__name__, "pending": "scene not available yet"})
+    else:
+        problems.append({"skipped": "run with --problems (or --full) to time fit against Nelder-Mead"})
+    payload["design_problems"] = problems
+    payload["total_s"] = time.perf_counter() - t0
+    path = write_result("design", payload, out_dir=args.out)
+    print(f"wrote {path} in {payload['total_s']:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
