@@ -6,6 +6,31 @@ Positions by a batched Newton solve of the loop-closure equations; every derivat
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
+from .actuators import DCMotor as DCMotor
+from .actuators import HydraulicCylinder as HydraulicCylinder
+from .actuators import LinearSpring as LinearSpring
+from .actuators import ScrewJack as ScrewJack
+from .actuators import SMAWire as SMAWire
+from .dynamics import Axial as Axial
+from .dynamics import Body as Body
+from .dynamics import DynStatus as DynStatus
+from .dynamics import Equilibrium as Equilibrium
+from .dynamics import Gravity as Gravity
+from .dynamics import InverseDynamics as InverseDynamics
+from .dynamics import Model as Model
+from .dynamics import Moment as Moment
+from .dynamics import PointForce as PointForce
+from .dynamics import Potential as Potential
+from .dynamics import Trajectory as Trajectory
+from .dynamics import dyn_status_message as dyn_status_message
+from .dynamics import equilibrium as equilibrium
+from .dynamics import forward_dynamics as forward_dynamics
+from .dynamics import generalized_forces as generalized_forces
+from .dynamics import inverse_dynamics as inverse_dynamics
+from .dynamics import inverse_dynamics_at as inverse_dynamics_at
+from .dynamics import kinetic_energy as kinetic_energy
+from .dynamics import mass_matrix as mass_matrix
+from .dynamics import potential_energy as potential_energy
 from .kinematics import ConstantSpeed as ConstantSpeed
 from .kinematics import Motion as Motion
 from .kinematics import Ramp as Ramp

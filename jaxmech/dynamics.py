@@ -355,8 +355,13 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     dtype = q.dtype
     path = _path(model, q, ok, u, u_dot, u_ddot, p)
     pv = Vars(p)
-    (g0, gd, gdd) = time_derivatives(lambda s: _geometry(model, *path(s), p), jnp.zeros((), dtype))
-    (_, qd_), (_, ud_) = jax.jvp(path, (jnp.zeros((), dtype),), (jnp.ones((), dtype),))
+    geo = lambda s: _geometry(model, *path(s), p)  # noqa: E731
+    if inertia:
+        g0, gd, gdd = time_derivatives(geo, jnp.zeros((), dtype))
+    else:  # quasi-static: no accelerations, so no second derivatives to trace
+        g0, gd = jax.jvp(geo, (jnp.zeros((), dtype),), (jnp.ones((), dtype),))
+        gdd = (None, None)
+    _, (qd_, ud_) = jax.jvp(path, (jnp.zeros((), dtype),), (jnp.ones((), dtype),))
     vel = Vars({**{n: qd_[i] for i, n in enumerate(mech.coords)}, **{n: ud_[i] for i, n in enumerate(mech.inputs)}})
     qv, uv = mech.vars_q(q), mech.vars_u(u)
     m_, J_ = _masses(model, p)
@@ -660,42 +665,49 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
         return sol.q, r, j, ok
 
     bracket = mech.dof == 1
-    q0, r0, j0, ok0 = evaluate(u0, guess)
-    if bracket:
-        _, r_lo, _, ok_lo = evaluate(lo, guess)
-        _, r_hi, _, ok_hi = evaluate(hi, guess)
-        has_root = ok_lo & ok_hi & (jnp.sign(r_lo[0]) != jnp.sign(r_hi[0])) | (r_lo[0] == 0) | (r_hi[0] == 0)
-    else:
-        r_lo, has_root = r0, jnp.asarray(True)
+    batch_eval = jax.vmap(evaluate, in_axes=(0, None))
 
-    # state: k, u, q, r, j, a, b, step, ok, done
+    # One copy of the (costly to compile) residual: iteration 0 evaluates the start and both
+    # ends of the range as a batch of three; later iterations evaluate their one new point.
+    # state: k, u, q, r, j, a, b, step, ok, done, r_lo, has_root
     def cond_fn(st):
-        k, *_, done = st
-        return (~done) & (k < max_steps)
+        k, *_, done, _r_lo, _has = st
+        return (~done) & (k < max_steps + 1)
 
     def body(st):
-        k, u, q, r, j, a, b, step, ok, done = st
+        k, u, q, r, j, a, b, step, ok, done, r_lo, has_root = st
+        first = k == 0
         newton = u - _solve_small(j, r)
         if bracket:
             # Safeguarded Newton (rtsafe): keep a sign-change bracket, bisect when Newton leaves it.
             inside = jnp.all(jnp.isfinite(newton)) & (newton[0] > a[0]) & (newton[0] < b[0])
-            un = jnp.where(inside, newton, 0.5 * (a + b))
+            cand = jnp.where(inside, newton, 0.5 * (a + b))
         else:
-            un = jnp.clip(jnp.where(jnp.all(jnp.isfinite(newton)), newton, u), lo, hi)
-        qn, rn, jn, okn = evaluate(un, q)
+            cand = jnp.clip(jnp.where(jnp.all(jnp.isfinite(newton)), newton, u), lo, hi)
+        un = jnp.where(first, u0, cand)
+        pts = jnp.where(first, jnp.stack([u0, lo, hi]), jnp.stack([un, un, un]))
+        qs, rs, js, oks = batch_eval(pts, q)
+        qn, rn, jn, okn = qs[0], rs[0], js[0], oks[0]
         if bracket:
+            change = jnp.sign(rs[1, 0]) != jnp.sign(rs[2, 0])
+            root0 = (oks[1] & oks[2] & change) | (rs[1, 0] == 0) | (rs[2, 0] == 0)
+            has_root = jnp.where(first, root0, has_root)
+            r_lo = jnp.where(first, rs[1], r_lo)
             same = jnp.sign(rn[0]) == jnp.sign(r_lo[0])
-            a = jnp.where(same, un, a)
-            b = jnp.where(same, b, un)
-        step = jnp.max(jnp.abs(un - u))
+            a = jnp.where(first, lo, jnp.where(same, un, a))
+            b = jnp.where(first, hi, jnp.where(same, b, un))
+        step = jnp.where(first, jnp.inf, jnp.max(jnp.abs(un - u)))
         scale = 1.0 + jnp.max(jnp.abs(un))
-        done = (step <= xtol * scale) | jnp.all(rn == 0) | ~okn | ~jnp.all(jnp.isfinite(rn))
+        done = (step <= xtol * scale) | jnp.all(rn == 0) | ~okn | ~jnp.all(jnp.isfinite(rn)) | ~has_root
         if bracket:
             done = done | (b[0] - a[0] <= eps * scale)
-        return k + 1, un, qn, rn, jn, a, b, step, okn, done
+        return k + 1, un, qn, rn, jn, a, b, step, okn, done, r_lo, has_root
 
-    init = (0, u0, q0, r0, j0, lo, hi, jnp.asarray(jnp.inf, dtype), ok0, ~has_root | ~ok0)
-    k, u, q, r, j, a, b, step, ok, done = jax.lax.while_loop(cond_fn, body, init)
+    zero_r = jnp.zeros((mech.dof,), dtype)
+    init = (0, u0, guess, zero_r, jnp.eye(mech.dof, dtype=dtype), lo, hi, jnp.asarray(jnp.inf, dtype),
+            jnp.asarray(False), jnp.asarray(False), zero_r, jnp.asarray(True))
+    k, u, q, r, j, a, b, step, ok, done, r_lo, has_root = jax.lax.while_loop(cond_fn, body, init)
+    k = k - 1  # iteration 0 only evaluated the start and the ends
     # The last Newton step is cheap and takes the error from ~step^2 to round-off.
     last = u - _solve_small(j, r)
     scale = 1.0 + jnp.max(jnp.abs(u))
@@ -712,14 +724,15 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
     if not bracket:
         status = jnp.where((status == DynStatus.NOT_CONVERGED) & ~in_box, DynStatus.NO_EQUILIBRIUM, status)
     good = status == DynStatus.OK
-    # Re-solve the loop at the final input, then attach both to (p, t) for differentiation.
-    sol = solve_one(mech, stop(u), ps, q, options)
-    good = good & (sol.status == Status.CONVERGED)
-    q_star = jnp.where(good, stop(sol.q), jnp.nan)
-    u_eq = _attach_equilibrium(model, applied, jnp.where(good, stop(u), jnp.nan), q_star, good, p, t)
-    q_eq = implicit_root(mech, q_star, good, u_eq, p)
-    stiff = jax.jacfwd(lambda u_: _static_residual(model, applied, q_star, good, u_, ps, ts))(jnp.where(good, stop(u), lo))
-    return u_eq, q_eq, jnp.where(good, stiff, jnp.nan), status.astype(jnp.int32), k
+    u_star = jnp.where(good, stop(u), jnp.nan)
+    u_eq = _attach_equilibrium(model, applied, u_star, jnp.where(good, q, jnp.nan), good, p, t)
+    # Close the loop at the final input (a few Newton steps from the last iterate's q, which is
+    # within one quadratically small step) and attach it to (u_eq, p).
+    q_eq, q_ok = _close(mech, u_eq, p, jnp.where(good, q, guess), 3)
+    good = good & q_ok
+    status = jnp.where((status == DynStatus.OK) & ~q_ok, DynStatus.POSITION, status)
+    # The stiffness is the last iterate's Jacobian (one Newton step away: a diagnostic).
+    return u_eq, q_eq, jnp.where(good, j, jnp.nan), status.astype(jnp.int32), k
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
