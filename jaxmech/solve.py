@@ -46,6 +46,8 @@ class SolverOptions:
       guesses from jumping across assembly branches.
     - `patience`: iterations with less than 10% residual decrease before a sample is
       declared stalled (``INFEASIBLE``).
+    - `lean_steps`: plain Newton steps tried first for stroke points (from their anchor's
+      predictor) before the robust loop; points that fail its tests get the robust loop.
     - `dtype`: require this floating dtype (``"float64"`` raises if x64 is off or an
       argument is float32); ``None`` follows the arguments.
     """
@@ -56,6 +58,7 @@ class SolverOptions:
     cond_max: float | None = None
     max_step: float = 1.0
     patience: int = 8
+    lean_steps: int = 2
     dtype: str | None = None
 
 
@@ -137,6 +140,48 @@ def _all_finite(tree) -> jax.Array:
 
 
 # --------------------------------------------------------------------------- Newton (no gradients)
+def _scaled_residual(mech: Mechanism, u, p, dtype):
+    """``q -> (Phi/R, d(Phi/R)/dz)`` with ``z = q / s``, and the coordinate scales ``s``.
+
+    ``s`` is 1 for angles and the design's length scale for lengths; ``R`` is the residual
+    scale (the length scale for loop closures).  Both make tolerances unit-independent.
+    """
+    L = mech.length_scale(p).astype(dtype)
+    R = mech.residual_scales(p, dtype)
+    s = jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+
+    def evaluate(q):
+        def f(q_):
+            r = mech.residual(q_, u, p) / R
+            return r, r
+
+        j, r = jax.jacfwd(f, has_aux=True)(q)
+        return r, j * s[None, :]
+
+    return evaluate, s
+
+
+def _lean_newton(mech: Mechanism, opts: SolverOptions, iters: int, u, p, guess):
+    """A fixed number of plain Newton steps from a close guess, then the same convergence,
+    conditioning and finiteness tests as ``_newton``.  No loop control, no damping: the fast
+    path for stroke points predicted from a solved anchor.  Returns ``(q, ok, rn, cond)``;
+    samples with ``ok`` False are re-solved by ``_newton``.
+    """
+    dtype = guess.dtype
+    xtol, ftol, cond_max = _tolerances(opts, dtype)
+    evaluate, s = _scaled_residual(mech, u, p, dtype)
+    q = guess
+    for _ in range(iters):
+        r, js = evaluate(q)
+        q = q - _solve_small(js, r) * s
+    r, js = evaluate(q)
+    dz = _solve_small(js, r)
+    rn = jnp.linalg.norm(r)
+    cond = _cond1(js)
+    ok = (jnp.max(jnp.abs(dz)) <= xtol) & (rn <= ftol) & (cond <= cond_max) & jnp.all(jnp.isfinite(dz))
+    return q - dz * s, ok & _all_finite((u, p, guess)), rn, cond
+
+
 def _newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     """Damped Newton / Levenberg-Marquardt for one sample.  Returns raw (q, status, ...).
 
@@ -148,19 +193,9 @@ def _newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     """
     dtype = guess.dtype
     xtol, ftol, cond_max = _tolerances(opts, dtype)
-    L = mech.length_scale(p).astype(dtype)
-    R = mech.residual_scales(p, dtype)  # residual units per equation (L for loop closures)
-    s = jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+    evaluate, s = _scaled_residual(mech, u, p, dtype)
     m = mech.m
     eye = jnp.eye(m, dtype=dtype)
-
-    def evaluate(q):
-        def f(q_):
-            r = mech.residual(q_, u, p) / R
-            return r, r
-
-        j, r = jax.jacfwd(f, has_aux=True)(q)
-        return r, j * s[None, :]  # scaled residual and Jacobian d(Phi/L)/dz
 
     def step(r, js, mu):
         newton = _solve_small(js, r)
@@ -434,69 +469,93 @@ def _tangent(mech, q, u, p):
     return jax.vmap(lambda c: -_solve_small(jq, c), in_axes=1, out_axes=1)(ju)
 
 
-def _stroke_one(mech: Mechanism, options: SolverOptions, n_anchors: int, us, p, guess):
-    """Continuation along one stroke ``us (N, dof)`` of one design.
+def _on_branch(mech: Mechanism, b0, q, u, p):
+    """Whether ``q`` is on the assembly branch whose indicator sign is ``b0`` (0: any)."""
+    if mech.branch is None:
+        return jnp.asarray(True)
+    return (b0 == 0) | (jnp.sign(mech.branch_value(q, u, p)) == b0)
 
-    Anchors (every k-th input and the last) are solved in sequence, each guessed by a
-    first-order predictor ``q + dq/du du`` from the previous anchor, which keeps the branch.
-    Every input is then solved in parallel from the predictor of its nearest anchor.
+
+def _stroke_guesses(mech: Mechanism, options: SolverOptions, n_anchors: int, us, p, guess):
+    """Guesses for every input of one stroke ``us (N, dof)`` of one design (no gradients).
+
+    Anchors (every k-th input and the last) are solved in sequence by the robust Newton, each
+    guessed by the first-order predictor ``q + dq/du du`` from the previous anchor, which
+    keeps the branch.  Every input's guess is the predictor of its nearest anchor.  Returns
+    ``(guesses (N, m), b0)`` with ``b0`` the stroke's branch sign (its first guess's).
     """
     n = us.shape[0]
     k = max(1, -(-n // n_anchors))
     idx = np.unique(np.concatenate([np.arange(0, n, k), [n - 1]]))
     ua = us[idx]
-    stop = jax.lax.stop_gradient
-    ps = jax.tree_util.tree_map(stop, p)
+    # A large step can carry the predictor across the branch boundary, where Newton then
+    # converges (per its own guess) on the other branch; so every anchor is checked against
+    # the stroke's branch.
+    b0 = jnp.sign(mech.branch_value(guess, us[0], p)) if mech.branch is not None else jnp.zeros((), guess.dtype)
 
     def predict(q, t, u_from, u_to):
         return q + t @ (u_to - u_from)
 
-    # The stroke's branch is its first guess's.  A large step can carry the predictor across
-    # the branch boundary, where Newton then converges (per its own guess) on the other
-    # branch; so every anchor and every point is checked against the stroke's branch.
-    if mech.branch is not None:
-        b0 = jnp.sign(mech.branch_value(stop(guess), us[0], ps))
-
-        def on_branch(q, u):
-            return (b0 == 0) | (jnp.sign(mech.branch_value(q, u, ps)) == b0)
-    else:
-
-        def on_branch(q, u):
-            return jnp.asarray(True)
-
     def scan_fn(carry, u_next):
         q, t, u_prev = carry
         g = predict(q, t, u_prev, u_next)
-        g = jnp.where(on_branch(g, u_next), g, q)  # a predictor off the branch: fall back to q
-        qn, status, *_ = _newton(mech, options, stop(u_next), ps, g)
-        good = (status == Status.CONVERGED) & on_branch(qn, u_next)
-        tn = _tangent(mech, jnp.where(good, qn, q), u_next, ps)
+        g = jnp.where(_on_branch(mech, b0, g, u_next, p), g, q)  # a predictor off the branch: fall back to q
+        qn, status, *_ = _newton(mech, options, u_next, p, g)
+        good = (status == Status.CONVERGED) & _on_branch(mech, b0, qn, u_next, p)
+        tn = _tangent(mech, jnp.where(good, qn, q), u_next, p)
         tn = jnp.where(good & jnp.all(jnp.isfinite(tn)), tn, t)
         # After a failure keep the last good anchor: later anchors restart from it.
-        return (jnp.where(good, qn, q), tn, jnp.where(good, u_next, u_prev)), (jnp.where(good, qn, q), tn, jnp.where(good, u_next, u_prev))
+        carry = (jnp.where(good, qn, q), tn, jnp.where(good, u_next, u_prev))
+        return carry, carry
 
     # The first anchor is solved from the user's guess (zero tangent: the predictor is the
     # guess itself); one traced Newton serves every anchor, which halves compile time.
     t_init = jnp.zeros((mech.m, mech.dof), guess.dtype)
-    _, (qa, ta, uaa) = jax.lax.scan(scan_fn, (stop(guess), t_init, ua[0]), ua)
+    _, (qa, ta, uaa) = jax.lax.scan(scan_fn, (guess, t_init, ua[0]), ua)
     nearest = np.clip(np.round(np.arange(n) / k).astype(int), 0, len(idx) - 1)
-    # Points are re-solved below; the anchor arrays only give their guesses.
     guesses = jax.vmap(predict)(qa[nearest], ta[nearest], uaa[nearest], us)
-    guesses = jnp.where(jax.vmap(on_branch)(guesses, us)[:, None], guesses, qa[nearest])
-    guesses = guesses.at[0].set(stop(guess))
-    sol = jax.vmap(lambda u_, g_: solve_one(mech, u_, p, g_, options))(us, guesses)
-    # Converged, but on the other branch than the stroke's: BRANCH, positions NaN.
-    flipped = (sol.status == Status.CONVERGED) & ~jax.vmap(on_branch)(stop(sol.q), us)
-    return dataclasses.replace(
-        sol,
-        q=jnp.where(flipped[:, None], jnp.nan, sol.q),
-        status=jnp.where(flipped, Status.BRANCH, sol.status).astype(sol.status.dtype),
-    )
+    on = jax.vmap(lambda g_, u_: _on_branch(mech, b0, g_, u_, p))(guesses, us)
+    return jnp.where(on[:, None], guesses, qa[nearest]), b0
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
 def _stroke_batch(mech, options, n_anchors, us, p, guess):
-    return jax.vmap(lambda p_, g_: _stroke_one(mech, options, n_anchors, us, p_, g_))(p, guess)
+    """Strokes of D designs: ``p`` leaves ``(D,)``, ``guess (D, m)``; returns ``(D, N)`` fields.
+
+    Every point is first solved by a few plain Newton steps from its anchor's predictor
+    (``_lean_newton``); only if some point of the whole batch fails that test is the robust
+    damped Newton run (one batch-level ``lax.cond``, so a clean batch never pays for it).
+    """
+    stop = jax.lax.stop_gradient
+    ps = jax.tree_util.tree_map(stop, p)
+    guesses, b0 = jax.vmap(lambda p_, g_: _stroke_guesses(mech, options, n_anchors, us, p_, g_))(ps, stop(guess))
+    per_point = lambda fn: jax.vmap(lambda p_, g_: jax.vmap(lambda u_, gg: fn(u_, p_, gg))(us, g_))  # noqa: E731
+    ql, okl, rnl, condl = per_point(lambda u_, p_, g_: _lean_newton(mech, options, options.lean_steps, u_, p_, g_))(ps, guesses)
+    branch_of = per_point(lambda u_, p_, q_: mech.branch_value(q_, u_, p_))
+    on_branch = jax.vmap(lambda b_, p_, q_: jax.vmap(lambda u_, qq: _on_branch(mech, b_, qq, u_, p_))(us, q_))
+    okl = okl & on_branch(b0, ps, ql)
+
+    def robust(_):
+        q, st, k, rn, cond, br = per_point(lambda u_, p_, g_: _newton(mech, options, u_, p_, g_))(ps, guesses)
+        return q, st.astype(jnp.int32), jnp.asarray(k, jnp.int32), rn, cond, br
+
+    def lean_only(_):
+        return (ql, jnp.full(okl.shape, Status.CONVERGED, jnp.int32), jnp.full(okl.shape, options.lean_steps, jnp.int32),
+                rnl, condl, branch_of(ps, ql))
+
+    qr, st, steps, rn, cond, br = jax.lax.cond(jnp.any(~okl), robust, lean_only, None)
+    lean_br = branch_of(ps, ql)
+    q_raw = jnp.where(okl[..., None], ql, qr)
+    status = jnp.where(okl, Status.CONVERGED, st)
+    steps = jnp.where(okl, options.lean_steps, steps)
+    rn, cond, br = (jnp.where(okl, a, b) for a, b in ((rnl, rn), (condl, cond), (lean_br, br)))
+    # Converged, but on another branch than the stroke's: BRANCH, positions NaN.
+    flipped = (status == Status.CONVERGED) & ~on_branch(b0, ps, q_raw)
+    status = jnp.where(flipped, Status.BRANCH, status).astype(jnp.int32)
+    ok = status == Status.CONVERGED
+    q_star = jnp.where(ok[..., None], q_raw, jnp.nan)
+    q = jax.vmap(lambda qs, ok_, p_: jax.vmap(lambda qq, oo, u_: implicit_root(mech, qq, oo, u_, p_))(qs, ok_, us))(q_star, ok, p)
+    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, coords=mech.coords)
 
 
 def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int = 256, throw: bool = False) -> Solution:
