@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from .mechanism import Mechanism
-from .solve import Solution, SolverOptions, _as_inputs, implicit_root, solve_stroke
+from .solve import Solution, SolverOptions, _as_inputs, _solve_small, implicit_root, solve_stroke
 from .status import Status
 
 __all__ = [
@@ -89,14 +89,38 @@ def _root_fn(mech: Mechanism, sol_q, ok, p):
 def input_derivatives(mech: Mechanism, q, u, p):
     """``dq/du`` and ``d2q/du2`` at one solved sample.
 
+    Differentiating ``Phi(q(u), u) = 0`` once and twice along the inputs:
+
+        Phi_q q' = -Phi_u,        Phi_q q''[j, k] = -D2 Phi[x_j, x_k],  x_j = (q'_j, e_j),
+
+    so one Jacobian, one factorisation and one second directional derivative per input
+    pair serve both orders.  ``q`` is the solver's root, itself attached to ``(u, p)`` by the
+    implicit function theorem, so these are differentiable in ``u`` and ``p`` again.
+
     Shapes ``(m, dof)`` and ``(m, dof, dof)``; units rad (or m) per unit input.  Samples
     with NaN positions give zeros (mask them by status).
     """
+    m, dof = mech.m, mech.dof
     ok = jnp.all(jnp.isfinite(q))
-    f = _root_fn(mech, q, ok, p)
-    d1 = jax.jacfwd(f)(u)
-    d2 = jax.jacfwd(jax.jacfwd(f))(u)
-    return d1, d2
+    q_s = jnp.where(ok, q, jnp.zeros_like(q))
+    jq = jax.jacfwd(mech.residual, 0)(q_s, u, p)
+    jq = jnp.where(ok, jq, jnp.eye(m, dtype=jq.dtype))
+    ju = jax.jacfwd(mech.residual, 1)(q_s, u, p)
+    d1 = -jax.vmap(lambda c: _solve_small(jq, c), in_axes=1, out_axes=1)(ju)
+    dirs = jnp.concatenate([d1, jnp.eye(dof, dtype=d1.dtype)], axis=0)  # columns x_j in (q, u)
+
+    def phi(x):
+        return mech.residual(q_s + x[:m], u + x[m:], p)
+
+    zero = jnp.zeros(m + dof, d1.dtype)
+
+    def second(xj, xk):
+        return jax.jvp(lambda a: jax.jvp(phi, (a,), (xk,))[1], (zero,), (xj,))[1]
+
+    hess = jax.vmap(lambda xj: jax.vmap(lambda xk: second(xj, xk), in_axes=1, out_axes=1)(dirs), in_axes=1, out_axes=1)(dirs)
+    d2 = -jax.vmap(jax.vmap(lambda c: _solve_small(jq, c), in_axes=1, out_axes=1), in_axes=2, out_axes=2)(hess)
+    zero_if = lambda x: jnp.where(ok, x, jnp.zeros_like(x))  # noqa: E731
+    return zero_if(d1), zero_if(d2)
 
 
 def time_derivatives(fn: Callable, t):

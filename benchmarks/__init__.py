@@ -1,0 +1,1 @@
+"""jaxmech benchmarks: one script per question, JSON results in ``results/``, a summary table."""
