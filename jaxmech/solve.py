@@ -336,40 +336,39 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
 
 
 # --------------------------------------------------------------------------- user-facing batching
+def _stack_named(mech: Mechanism, names, values: Mapping, what: str, kind: str):
+    """``{name: array}`` -> array ``(..., len(names))`` in ``names`` order, or ValueError."""
+    unknown = [k for k in values if k not in names]
+    if unknown:
+        raise ValueError(f"{mech.name}: unknown {kind} name(s) {unknown} in {what}; {kind}s are {list(names)}")
+    missing = [k for k in names if k not in values]
+    if missing:
+        raise ValueError(f"{mech.name}: missing {kind}(s) {missing} in {what}")
+    return jnp.stack(jnp.broadcast_arrays(*[jnp.asarray(values[k]) for k in names]), axis=-1)
+
+
+def _with_last_axis(mech: Mechanism, x, names, what: str, kind: str):
+    x = jnp.asarray(x)
+    if x.ndim == 0 or x.shape[-1] != len(names):
+        raise ValueError(f"{mech.name}: {what} must have a last axis of size {len(names)} ({kind}s {names}), got shape {x.shape}")
+    return x
+
+
 def _as_inputs(mech: Mechanism, u, what="u"):
     """Inputs as an array ``(..., dof)``.  A dict maps input names to arrays; for one-input
     mechanisms a bare array is the batch of that input."""
     if isinstance(u, Mapping):
-        unknown = [k for k in u if k not in mech.inputs]
-        if unknown:
-            raise ValueError(f"{mech.name}: unknown input name(s) {unknown} in {what}; inputs are {list(mech.inputs)}")
-        missing = [k for k in mech.inputs if k not in u]
-        if missing:
-            raise ValueError(f"{mech.name}: missing input(s) {missing} in {what}")
-        arrs = jnp.broadcast_arrays(*[jnp.asarray(u[k]) for k in mech.inputs])
-        return jnp.stack(arrs, axis=-1)
-    u = jnp.asarray(u)
+        return _stack_named(mech, mech.inputs, u, what, "input")
     if mech.dof == 1:
-        return u[..., None]
-    if u.ndim == 0 or u.shape[-1] != mech.dof:
-        raise ValueError(f"{mech.name}: {what} must have a last axis of size {mech.dof} (inputs {mech.inputs}), got shape {u.shape}")
-    return u
+        return jnp.asarray(u)[..., None]
+    return _with_last_axis(mech, u, mech.inputs, what, "input")
 
 
 def _as_coords(mech: Mechanism, q, what="guess"):
+    """Coordinates as an array ``(..., m)``, from an array or ``{coord_name: array}``."""
     if isinstance(q, Mapping):
-        unknown = [k for k in q if k not in mech.coords]
-        if unknown:
-            raise ValueError(f"{mech.name}: unknown coordinate name(s) {unknown} in {what}; coordinates are {list(mech.coords)}")
-        missing = [k for k in mech.coords if k not in q]
-        if missing:
-            raise ValueError(f"{mech.name}: missing coordinate(s) {missing} in {what}")
-        arrs = jnp.broadcast_arrays(*[jnp.asarray(q[k]) for k in mech.coords])
-        return jnp.stack(arrs, axis=-1)
-    q = jnp.asarray(q)
-    if q.ndim == 0 or q.shape[-1] != mech.m:
-        raise ValueError(f"{mech.name}: {what} must have a last axis of size {mech.m} (coordinates {mech.coords}), got shape {q.shape}")
-    return q
+        return _stack_named(mech, mech.coords, q, what, "coordinate")
+    return _with_last_axis(mech, q, mech.coords, what, "coordinate")
 
 
 def _check_dtype(options: SolverOptions, named: dict[str, Any]):
