@@ -15,9 +15,8 @@
 3. **Design problems** (``--problems`` or ``--full``): multi-start ``design.fit`` (L-BFGS,
    implicit gradients) against ``scipy.optimize.minimize(method="Nelder-Mead")`` from the
    same starts on the same objective: time and evaluations to the same objective value.
-   ``DESIGN_PROBLEMS`` is the hook: the four-bar parameter identification is registered
-   here; the flap_msd design problem is to be registered by that scene's author (see
-   ``flap_msd_problem``: it returns ``None`` until the scene exists).
+   ``DESIGN_PROBLEMS`` registers the four-bar parameter identification and the flap_msd
+   design problem of ``jaxmech.problems`` (``flap_msd_problem``).
 
 Run: ``python -m benchmarks.design [--quick] [--full] [--problems]``; writes
 ``results/design.json``.  The default run takes a few minutes on 2 idle cores.
@@ -189,14 +188,23 @@ def fourbar_identification_problem():
 
 
 def flap_msd_problem():
-    """Hook for the flap_msd design problem (issue 5): return the same dict as
-    ``fourbar_identification_problem`` (name, objective figure, starts, bounds) once the
-    ``flap_msd`` scene exists; ``None`` until then."""
+    """The flap_msd design problem (issue 5, ``jaxmech.problems.flap_msd``): least smooth
+    peak motor torque (``peak(mode="smooth")``, T = 1 N m) over the free lengths
+    (d, p, s, t, g) of loops 2-3, with h and z eliminated so that the second flap starts
+    where the document's does and turns through exactly 60 deg.  Four starts: the
+    document's design and three within +-10 %."""
     from jaxmech.scenes import scene_names
 
     if "flap_msd" not in scene_names():
         return None
-    return None  # TODO(flap_msd author): objective = scene_figure(get_scene("flap_msd"), ...)
+    from jaxmech.problems import flap_bounds, flap_msd_objective, flap_starts
+
+    return {
+        "name": "flap_msd_60deg_min_peak_torque",
+        "objective": flap_msd_objective(POINTS),
+        "starts": flap_starts(4),
+        "bounds": flap_bounds(),
+    }
 
 
 DESIGN_PROBLEMS = [fourbar_identification_problem, flap_msd_problem]

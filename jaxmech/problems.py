@@ -1,0 +1,652 @@
+"""Worked design problems (issue 5): each a function that states a design question of
+one of the scenes, answers it with ``jaxmech.design`` and reports the answer in words.
+
+- ``flap_msd``: linkage lengths of the MSD double flap for exactly 60 deg of second-flap
+  travel at the least peak motor torque.
+- ``landing_gear``: the nose gear's ``d`` and ``h`` from its stroke and 90 deg rotation.
+- ``arc_track_flap``: the shallowest fairing for the arc-track flap under the thesis's
+  validity checks and a cap on the screw torque.
+- ``identify_fourbar``: link lengths and a damping coefficient of a loaded four-bar from
+  noisy motion and torque records, with their Gauss-Newton standard errors.
+
+Every problem uses the engine's stroke solve (continuation, derivatives by the implicit
+function theorem).  The design problems minimise ``scene_figure`` objectives with
+``design.fit`` (optax L-BFGS from several starts at once); the identification is a
+least-squares problem and uses Levenberg-Marquardt on the engine's residual Jacobian.  Constraints are handled in one of two ways, stated
+per problem: *elimination* (an equality solved exactly for some of the parameters inside
+the objective: a projection onto the constraint) or an *exterior quadratic penalty*
+(``w * max(g, 0)^2``, whose optimum violates ``g <= 0`` by ``O(1/w)``; a back-off margin
+larger than that puts the answer strictly inside).
+
+Each function builds its objective once per setting (``functools.cache``), so a second
+call reuses the compiled fit loop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .design import FitResult, fit, peak, scene_figure
+from .dynamics import Body, Gravity, Model, Moment, generalized_forces
+from .scenes.base import Scene
+from .sweep import design_columns
+
+__all__ = [
+    "FlapDesign",
+    "GearDesign",
+    "FairingDesign",
+    "Identification",
+    "flap_msd",
+    "flap_msd_objective",
+    "flap_starts",
+    "flap_bounds",
+    "landing_gear",
+    "arc_track_flap",
+    "identify_fourbar",
+    "LOADED_FOURBAR",
+]
+
+_DEG = np.pi / 180.0
+
+
+def _jnp(p):
+    return {k: jnp.asarray(v, jnp.result_type(float)) for k, v in p.items()}
+
+
+def _lean(scene: Scene, outputs) -> Scene:
+    """The scene with only the outputs a problem needs and no drawing points: the same
+    loops, stroke, guess and loads, but a smaller program to compile (the points' time
+    derivatives and the unused outputs are not traced)."""
+    mech = dataclasses.replace(scene.mechanism, points={})
+    return dataclasses.replace(scene, name=f"{scene.name}_lean", mechanism=mech, outputs=outputs, drawing=None)
+
+
+def _flap_torque(p, mo):
+    # The energy method's closed-form torque (the document's formula with its two
+    # corrections), equal to the scene's virtual-power torque (tests/seeds/test_flap_msd.py;
+    # tests/test_problems.py checks the answer with run_scene) and cheaper to compile:
+    # no reverse pass inside the objective's own gradient.
+    from .scenes.flap_msd import torque_document
+
+    return {"torque": (torque_document(p, mo, corrected=True), "N m")}
+
+
+@functools.cache
+def _flap_scene() -> Scene:
+    from .scenes.flap_msd import SCENE
+
+    return _lean(SCENE, _flap_torque)
+
+
+@functools.cache
+def _arc_scene() -> Scene:
+    from .scenes.arc_track_flap import SCENE, quasi_static
+
+    return _lean(SCENE, lambda p, mo: {"T_R": (quasi_static(mo.q, mo.u, p)["T_R"], "N m")})
+
+
+# =========================================================================== 1. flap_msd
+#: Design variables of ``flap_msd``: loop 2 (bar BD, bar DGE, pivot B) and the E-G length.
+#: Loop 1 (crank, coupler, main flap) keeps the document's values, so the main flap moves
+#: exactly as designed; ``h`` (link EH) and ``z`` (arm FH) are eliminated by the two
+#: equalities below.
+FLAP_FREE = ("d", "p", "s", "t", "g")
+FLAP_ELIMINATED = ("h", "z")
+FLAP_TRAVEL = 60.0 * _DEG  #: required second-flap travel over the stroke (rad)
+FLAP_TEMPERATURE = 1.0  #: N m, temperature of the smooth peak (bound T log N)
+
+
+def _flap_theta_ends(p):
+    """theta at alpha = 275 and 320 deg (rad), closed form (circle intersections)."""
+    from .scenes.flap_msd import ALPHA_END, ALPHA_START, closed_form_positions
+
+    return closed_form_positions(p, ALPHA_START)[5], closed_form_positions(p, ALPHA_END)[5]
+
+
+@functools.cache
+def _flap_doc_theta_start() -> float:
+    """The document's theta at alpha = 275 deg (rad): 0.024093 deg."""
+    from .scenes.flap_msd import DEFAULTS
+
+    with jax.ensure_compile_time_eval():  # a constant, also when first needed under a trace
+        return float(_flap_theta_ends({k: jnp.asarray(v, jnp.float64) for k, v in DEFAULTS.items()})[0])
+
+
+def _flap_project(free):
+    """``(h, z, ok)`` with theta(275) = the document's and theta(320) - theta(275) = 60 deg.
+
+    Newton on the 2x2 closed-form system ``F(h, z; free) = 0`` from the document's
+    ``(h, z)``, iterated without derivatives; then one Newton step with the free
+    parameters traced and the Jacobian held: at a root its derivative is
+    ``-F_{hz}^{-1} F_free``, the implicit function theorem's, and its value is unchanged.
+    """
+    from .scenes.flap_msd import DEFAULTS
+
+    base = _jnp(DEFAULTS)
+    theta0 = _flap_doc_theta_start()
+
+    def F(x, fr):
+        p = {**base, **fr, "h": x[0], "z": x[1]}
+        a, b = _flap_theta_ends(p)
+        return jnp.stack([a - theta0, b - a - FLAP_TRAVEL])
+
+    stop = jax.lax.stop_gradient
+    fr0 = stop(free)
+    x0 = jnp.stack([base["h"], base["z"]])
+    x = jax.lax.fori_loop(0, 30, lambda _, x: x - jnp.linalg.solve(jax.jacfwd(F)(x, fr0), F(x, fr0)), x0)
+    res = F(x, fr0)
+    ok = jnp.all(jnp.isfinite(x)) & jnp.all(jnp.abs(res) < 1e-9) & jnp.all(x > 0)
+    x = jnp.where(ok, x, x0)  # mask the inputs of what follows
+    x = x - jnp.linalg.solve(stop(jax.jacfwd(F)(x, fr0)), F(x, free))
+    return x[0], x[1], ok
+
+
+def _flap_peak_smooth(cols, p):
+    return peak(cols["torque[N m]"], "smooth", temperature=FLAP_TEMPERATURE)
+
+
+def _flap_peak_max(cols, p):
+    return peak(cols["torque[N m]"], "argmax")
+
+
+@functools.cache
+def flap_msd_objective(points: int = 101):
+    """The objective of ``flap_msd``: ``f(free) -> (value, ok)``, ``free`` = ``{name: scalar}``
+    over ``FLAP_FREE``.
+
+    The value is the smooth peak (``design.peak(mode="smooth")``, ``T`` =
+    ``FLAP_TEMPERATURE`` = 1 N m, so within ``T log N`` = 4.6 N m of the sampled maximum
+    for ``N`` = 101) of the motor torque over the stroke, N m, for the design whose ``h``
+    and ``z`` are solved from the two equalities (theta starts where the document's does,
+    and turns through exactly 60 deg).  ``ok`` is False when the equalities cannot be met
+    or a sample of the stroke does not converge.  One object per ``points``: jitted
+    callers compile once.
+    """
+    fig = scene_figure(_flap_scene(), _flap_peak_smooth, points=points, name="peak torque (smooth)")
+
+    def objective(free):
+        h, z, ok_proj = _flap_project(dict(free))
+        value, ok = fig({**free, "h": h, "z": z})
+        ok = ok & ok_proj
+        return jnp.where(ok, value, jnp.nan), ok
+
+    return objective
+
+
+@functools.cache
+def _flap_max_batch(points: int):
+    fig = scene_figure(_flap_scene(), _flap_peak_max, points=points, name="peak torque")
+    return jax.jit(jax.vmap(lambda p: fig(p)[0]))
+
+
+@functools.cache
+def _flap_projection_batch():
+    return jax.jit(jax.vmap(lambda fr: _flap_project(fr)))
+
+
+def flap_starts(n: int = 4, *, seed: int = 0) -> dict[str, np.ndarray]:
+    """``n`` starting designs for ``flap_msd``: the document's, then random ones within
+    +-10 % of it (``numpy.random.default_rng(seed)``)."""
+    from .scenes.flap_msd import DEFAULTS
+
+    rng = np.random.default_rng(seed)
+    scale = np.concatenate([[1.0], 1.0 + 0.1 * (2 * rng.random(n - 1) - 1)]) if n > 1 else np.ones(1)
+    out = {}
+    for k in FLAP_FREE:
+        out[k] = DEFAULTS[k] * scale
+        scale = np.roll(scale, 1) if n > 2 else scale  # decorrelate the parameters
+        if n > 1:
+            scale[0] = 1.0
+    return out
+
+
+def flap_bounds() -> dict[str, tuple[float, float]]:
+    """Box of ``flap_msd``'s free parameters: 0.7 to 1.3 times the document's values."""
+    from .scenes.flap_msd import DEFAULTS
+
+    return {k: (0.7 * DEFAULTS[k], 1.3 * DEFAULTS[k]) for k in FLAP_FREE}
+
+
+@dataclasses.dataclass(frozen=True)
+class FlapDesign:
+    """Answer of ``flap_msd``.
+
+    - `params`: every scene parameter of the optimised design (SI), for ``run_scene``.
+    - `theta_travel`, `theta_start`: second-flap travel over the stroke and its angle at
+      alpha = 275 deg (rad, closed form: what the projection enforces).
+    - `peak_torque`, `document_peak_torque`: the sampled maximum of the motor torque over
+      the stroke (N m, ``peak(mode="argmax")`` at ``points`` samples).
+    - `improvement`: ``1 - peak_torque / document_peak_torque``.
+    - `fit`: the ``FitResult``; `report`: the answer in words.
+    """
+
+    params: dict
+    theta_travel: float
+    theta_start: float
+    peak_torque: float
+    document_peak_torque: float
+    document_theta_travel: float
+    improvement: float
+    points: int
+    fit: FitResult
+    report: str
+
+
+def flap_msd(*, points: int = 101, starts: int | dict = 4, steps: int = 100, optimizer=None) -> FlapDesign:
+    """Least peak motor torque for exactly 60 deg of second-flap travel (MSD double flap).
+
+    **Problem.**  Over the stroke alpha = 275 -> 320 deg the document's design turns the
+    second flap through 60.58 deg (goal: 60) with a peak motor torque of 3230.9 N m.
+    Choose the lengths of loops 2 and 3 so that theta turns through exactly 60 deg from
+    the same retracted start (theta(275 deg) = 0.0241 deg, the document's), with the
+    least peak torque.  Loop 1 is kept, so the main flap's motion is the document's.
+
+    **Method.**  Free: ``d, p, s, t, g`` (box 0.7-1.3 x the document's).  The two
+    equalities are met exactly by elimination: ``h`` and ``z`` are solved from them by
+    Newton on the closed-form end angles inside the objective (``flap_msd_objective``),
+    differentiated by the implicit function theorem.  Objective: the smooth peak of the
+    torque (``peak(mode="smooth")``, T = 1 N m); the answer's peak is then reported as the
+    sampled maximum (``mode="argmax"``).  ``design.fit`` with L-BFGS from `starts`.
+
+    **Arguments**: `points`: stroke samples; `starts`: number of starts (the document's
+    design first, see ``flap_starts``) or ``{name: (S,)}``; `steps`: step budget;
+    `optimizer`: an optax transformation (default ``optax.lbfgs()``).
+
+    **Returns** a ``FlapDesign``.  **Raises** ``RuntimeError`` if no start is feasible.
+    """
+    from .scenes.flap_msd import DEFAULTS
+
+    p0 = flap_starts(starts) if isinstance(starts, int) else dict(starts)
+    res = fit(flap_msd_objective(points), p0, bounds=flap_bounds(), optimizer=optimizer or _lbfgs(), steps=steps)
+    if res.best < 0:
+        raise RuntimeError("flap_msd: no start produced a feasible design\n" + res.report())
+    free = res.best_params
+    h, z, ok = _flap_projection_batch()(_jnp({k: [v] for k, v in free.items()}))
+    if not bool(ok[0]):
+        raise RuntimeError("flap_msd: the winning design does not meet the travel equalities")
+    best = {**DEFAULTS, **free, "h": float(h[0]), "z": float(z[0])}
+    design_vars = FLAP_FREE + FLAP_ELIMINATED
+    batch = {k: jnp.asarray([DEFAULTS[k], best[k]]) for k in design_vars}
+    peaks = np.asarray(_flap_max_batch(points)(batch))
+    th0, th1 = (float(x) for x in _flap_theta_ends(_jnp(best)))
+    d0, d1 = (float(x) for x in _flap_theta_ends(_jnp(DEFAULTS)))
+    improvement = 1.0 - peaks[1] / peaks[0]
+    lines = [
+        "flap_msd: least peak motor torque with exactly 60 deg of second-flap travel",
+        f"  document: theta travel {np.rad2deg(d1 - d0):.4f} deg, peak torque {peaks[0]:.2f} N m",
+        f"  design:   theta travel {np.rad2deg(th1 - th0):.10f} deg (from {np.rad2deg(th0):.4f} deg), "
+        f"peak torque {peaks[1]:.2f} N m ({100 * improvement:.1f} % lower)",
+        "  lengths (m): " + ", ".join(f"{k} {DEFAULTS[k]:.5f} -> {best[k]:.5f}" for k in design_vars),
+        "  equalities by elimination (h, z solved exactly); objective: smooth peak, T = "
+        f"{FLAP_TEMPERATURE:g} N m; reported peak: sampled maximum over {points} points",
+        res.report(),
+    ]
+    return FlapDesign(
+        params=best, theta_travel=th1 - th0, theta_start=th0, peak_torque=float(peaks[1]),
+        document_peak_torque=float(peaks[0]), document_theta_travel=d1 - d0,
+        improvement=float(improvement), points=points, fit=res, report="\n".join(lines),
+    )
+
+
+@functools.cache
+def _lbfgs():
+    # One object per process: fit's compiled loop is keyed on the optimizer.
+    return optax.lbfgs()
+
+
+# =========================================================================== 2. landing_gear
+@dataclasses.dataclass(frozen=True)
+class GearDesign:
+    """Answer of ``landing_gear`` (m, rad): the fitted ``d``, ``h`` and the engine's
+    polished solve of the design equations (``d``, ``h``, ``theta1``)."""
+
+    d: float
+    h: float
+    theta1: float
+    fit_d: float
+    fit_h: float
+    fit: FitResult
+    report: str
+
+
+def _gear_misfit(cols, p):
+    # Dimensionless: (rotation - 90 deg)^2 + (transmission angle at gear-down - 90 deg)^2.
+    th = cols["theta[rad]"]
+    rot = th[-1] - th[0]
+    ta = cols["transmission_angle[rad]"][0]
+    return jnp.square(rot - jnp.pi / 2) + jnp.square(ta - jnp.pi / 2)
+
+
+@functools.cache
+def _gear_objective():
+    from .scenes.landing_gear import SCENE
+
+    # Only the ends of the stroke matter: two samples.
+    return scene_figure(SCENE, _gear_misfit, points=2, name="gear misfit")
+
+
+def landing_gear(*, steps: int = 60) -> GearDesign:
+    """Recover the nose gear's ``d`` (B to rod end) and ``h`` (B to cylinder pivot).
+
+    **Problem** (report §3.1): the cylinder runs 1.25 -> 2 ft and the gear must turn
+    90 deg, with the cylinder perpendicular to BP at gear-down (the report's hidden right
+    angle).
+
+    **Method.**  (1) ``design.fit`` (L-BFGS, 4 starts between 0.5 and 2 ft) minimises
+    ``(rotation - 90 deg)^2 + (transmission angle at gear-down - 90 deg)^2``, both from the
+    engine's solve of the gear over its stroke (the scene, 2 samples).  (2) The fit's
+    answer seeds the engine's Newton solve of the three design equations
+    (``scenes.landing_gear.design``), which polishes it to machine precision.
+
+    **Returns** a ``GearDesign`` (m, rad).
+    """
+    from .scenes.landing_gear import FT, design
+
+    starts = {"d": FT * np.array([0.5, 1.0, 0.8, 0.7]), "h": FT * np.array([1.6, 1.5, 2.0, 1.4])}
+    bounds = {"d": (0.2 * FT, 1.5 * FT), "h": (0.8 * FT, 3.0 * FT)}
+    res = fit(_gear_objective(), starts, bounds=bounds, optimizer=_lbfgs(), steps=steps)
+    if res.best < 0:
+        raise RuntimeError("landing_gear: no start produced a feasible design\n" + res.report())
+    b = res.best_params
+    theta1 = float(np.arctan2(1.25 * FT, b["d"]))
+    sol = design(guess=(b["d"], b["h"], theta1))
+    d, h, th1 = (float(sol[k]) for k in ("d", "h", "theta1"))
+    lines = [
+        "landing_gear: d and h from the 1.25 -> 2 ft stroke, 90 deg of rotation and the right angle at P",
+        f"  fit:    d = {b['d'] / FT:.9f} ft, h = {b['h'] / FT:.9f} ft (misfit {res.value[res.best]:.3g})",
+        f"  solve:  d = {d / FT:.12f} ft, h = {h / FT:.12f} ft, theta1 = {np.rad2deg(th1):.8f} deg",
+        res.report(),
+    ]
+    return GearDesign(d=d, h=h, theta1=th1, fit_d=b["d"], fit_h=b["h"], fit=res, report="\n".join(lines))
+
+
+# =========================================================================== 3. arc_track_flap
+ARC_FREE = ("a1", "a2", "alpha0")
+ARC_TORQUE_CAP = 1.1  #: cap on the peak raise torque, times the thesis design's
+ARC_MARGIN = 1e-4  #: back-off of every penalised constraint (relative)
+ARC_WEIGHT = 1e6  #: penalty weight (objective ~ 1): violation O(1e-6) < ARC_MARGIN
+
+
+def _arc_constraints(cols, p, cap):
+    """Normalised constraints ``g <= 0`` (see ``arc_track_flap``)."""
+    s34_f = cols["s34[m]"][-1]
+    return jnp.stack([
+        peak(cols["T_R[N m]"], "argmax") / cap - 1.0,  # screw torque cap
+        s34_f / p["a3"] - 1.0,  # stroke <= screw
+        p["a2"] / p["a1"] - 1.0,  # a1 > a2 (s34_i > 0)
+        p["c1"] / p["b1"] - 1.0,  # c1 < b1
+    ])
+
+
+def _arc_depth(cols, p):
+    # Distance from A0 to the screw line: |Im(conj(e_s) (A0 - B0))| = a1 |sin(theta13)|;
+    # the fairing must clear its least value over the stroke.
+    return -peak(-p["a1"] * jnp.abs(jnp.sin(cols["theta13[rad]"])), "argmax")
+
+
+@dataclasses.dataclass(frozen=True)
+class _ArcPenalised:
+    """depth / baseline + w sum max(g + margin, 0)^2 (hashable: one compile per cap)."""
+
+    cap: float
+    depth0: float
+
+    def __call__(self, cols, p):
+        g = _arc_constraints(cols, p, self.cap) + ARC_MARGIN
+        return _arc_depth(cols, p) / self.depth0 + ARC_WEIGHT * jnp.sum(jnp.square(jnp.maximum(g, 0.0)))
+
+
+def _arc_measures(points, p):
+    scene = _arc_scene()
+    full = {**{k: jnp.asarray(v) for k, v in scene.defaults.items()}, **p}
+    cols, status = design_columns(scene, points, full)
+    return _arc_depth(cols, full), peak(cols["T_R[N m]"], "argmax"), cols["s34[m]"][-1], jnp.all(status == 0)
+
+
+@dataclasses.dataclass(frozen=True)
+class FairingDesign:
+    """Answer of ``arc_track_flap`` (SI).
+
+    - `params`: every scene parameter of the design; `depth`, `baseline_depth` (m): least
+      distance from A0 to the screw line over the stroke; `peak_T_R`, `baseline_peak_T_R`,
+      `cap` (N m, per jack); `s34_f` (m) stroke end (<= ``a3``).
+    """
+
+    params: dict
+    depth: float
+    baseline_depth: float
+    peak_T_R: float
+    baseline_peak_T_R: float
+    cap: float
+    s34_f: float
+    fit: FitResult
+    report: str
+
+
+def arc_track_flap(*, points: int = 41, steps: int = 100, cap_factor: float = ARC_TORQUE_CAP, optimizer=None) -> FairingDesign:
+    """Shallowest fairing for the arc-track flap (Arslan 2022, cruise loads).
+
+    **Problem.**  Minimise the fairing depth, the least distance from the remote centre A0
+    to the screw line over the stroke (the thesis's ``h = a2 cos(beta3/2)`` = 228.89 mm for
+    its design), over ``a1``, ``a2``, ``alpha0``, keeping the flap (``b1, c1, beta1..3``,
+    rotation 35 deg), the screw (``a3``, thread) and the loads, subject to the thesis's
+    validity checks (Section 5.3: ``c1 < b1``, ``s34_f <= a3``, ``a1 > a2``; the pins stay
+    in their slots over the stroke by construction of the collinear design) and a cap
+    ``T_R <= cap_factor x`` the thesis design's peak raise torque.
+
+    **Method.**  Constraints by an exterior quadratic penalty inside the objective
+    (``ARC_WEIGHT`` = 1e6 on dimensionless ``g``), each backed off by ``ARC_MARGIN`` =
+    1e-4 so that the penalty's O(1e-6) violation stays inside the feasible set; ``peak``
+    in ``"argmax"`` mode (the peaks sit at the stroke ends, where it is exact).  The
+    objective is the depth over the baseline depth.  ``design.fit``, L-BFGS, 3 starts.
+
+    **Returns** a ``FairingDesign``; check it with ``scenes.arc_track_flap.validate``.
+    """
+    from .scenes.arc_track_flap import SCENE
+
+    p0 = dict(SCENE.defaults)
+    measure = jax.jit(functools.partial(_arc_measures, points))
+    depth0, tr0, _, ok0 = (float(x) for x in measure(_jnp({k: p0[k] for k in ARC_FREE})))
+    cap = cap_factor * tr0
+    objective = _arc_objective(points, cap, depth0)
+    starts = {"a1": p0["a1"] * np.array([1.0, 1.03, 0.98]), "a2": p0["a2"] * np.array([1.0, 0.95, 0.97]),
+              "alpha0": p0["alpha0"] * np.array([1.0, 0.97, 1.02])}
+    bounds = {"a1": (0.8 * p0["a1"], 1.2 * p0["a1"]), "a2": (0.6 * p0["a2"], 1.2 * p0["a2"]),
+              "alpha0": (0.8 * p0["alpha0"], 1.2 * p0["alpha0"])}
+    res = fit(objective, starts, bounds=bounds, optimizer=optimizer or _lbfgs(), steps=steps)
+    if res.best < 0:
+        raise RuntimeError("arc_track_flap: no start produced a feasible design\n" + res.report())
+    best = {**p0, **res.best_params}
+    depth, tr, s34_f, ok = (float(x) for x in measure(_jnp(res.best_params)))
+    lines = [
+        "arc_track_flap: least fairing depth with the validity checks and "
+        f"T_R <= {cap_factor:g} x the thesis's peak",
+        f"  thesis: depth {1e3 * depth0:.3f} mm, peak T_R {tr0:.4f} N m (cap {cap:.4f} N m)",
+        f"  design: depth {1e3 * depth:.3f} mm ({100 * (1 - depth / depth0):.2f} % shallower), "
+        f"peak T_R {tr:.4f} N m, s34_f {1e3 * s34_f:.2f} mm <= a3 {1e3 * best['a3']:.0f} mm",
+        "  " + ", ".join(f"{k} {p0[k]:.6g} -> {best[k]:.6g}" for k in ARC_FREE),
+        f"  constraints by quadratic penalty (w = {ARC_WEIGHT:g}, margin {ARC_MARGIN:g})",
+        res.report(),
+    ]
+    return FairingDesign(params=best, depth=depth, baseline_depth=depth0, peak_T_R=tr, baseline_peak_T_R=tr0,
+                         cap=cap, s34_f=s34_f, fit=res, report="\n".join(lines))
+
+
+@functools.cache
+def _arc_objective(points, cap, depth0):
+    return scene_figure(_arc_scene(), _ArcPenalised(cap, depth0), points=points, name="penalised depth")
+
+
+# =========================================================================== 4. identification
+def _fourbar_loops(q, u, p):
+    from .mechanism import cis
+
+    return [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d]
+
+
+def _loaded_fourbar():
+    from .mechanism import Mechanism, cis
+    from .scenes.classic import FOURBAR
+
+    mech = Mechanism(
+        name="loaded_fourbar",
+        coords=("theta3", "theta4"),
+        inputs=("theta2",),
+        params=("a", "b", "c", "d", "m", "k_v", "g"),
+        lengths=("a", "b", "c", "d"),
+        constraints=_fourbar_loops,
+        points={
+            "B": lambda q, u, p: p.d + p.c * cis(q.theta4),
+            "P": lambda q, u, p: p.a * cis(u.theta2) + 0.5 * p.b * cis(q.theta3),
+        },
+        branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+    )
+    # A point mass m at the coupler's midpoint P, gravity, and a rotary damper on the
+    # rocker: moment -k_v theta4_dot (N m), k_v the load coefficient (N m s/rad).
+    model = Model(
+        mech,
+        bodies=(Body("P", mass="m", name="coupler mass"),),
+        loads=(Gravity("g"), Moment("theta4", lambda q, u, p, v, t: -p.k_v * v.theta4, name="rocker damper")),
+    )
+
+    def outputs(p, mo):
+        pj = dict(p)
+        tau = jax.vmap(lambda q, u, ud, udd, t: generalized_forces(model, q, u, ud, udd, pj, t)[0][0])(
+            mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.t)
+        return {"torque": (tau, "N m")}
+
+    scene = Scene(
+        name="loaded_fourbar",
+        summary="crank-rocker four-bar with a coupler mass and a rocker damper, one turn at 1 rev/s",
+        mechanism=mech,
+        defaults={**FOURBAR.defaults, "m": 2.0, "k_v": 5.0, "g": 9.81},
+        guess=FOURBAR.guess,
+        stroke=lambda p: (0.0, 2 * jnp.pi),
+        speed=2 * np.pi,
+        units={"theta2": "rad", "theta3": "rad", "theta4": "rad"},
+        outputs=outputs,
+    )
+    return scene, model
+
+
+#: The identification scene: ``FOURBAR`` (a = 1, b = 3, c = 2.5, d = 3.5 m) with a 2 kg
+#: point mass at the coupler midpoint, gravity, and a rocker damper ``k_v`` = 5 N m s/rad,
+#: driven at 1 rev/s; output column ``torque[N m]`` (inverse dynamics by virtual power).
+LOADED_FOURBAR, LOADED_FOURBAR_MODEL = _loaded_fourbar()
+
+IDENT_UNKNOWN = ("b", "c", "k_v")
+
+
+@dataclasses.dataclass(frozen=True)
+class Identification:
+    """Answer of ``identify_fourbar``.
+
+    - `estimate`, `truth`, `stderr`: ``{name: float}``; ``stderr`` from the Gauss-Newton
+      covariance ``(J^T J)^{-1}`` of the whitened residuals at the optimum.
+    - `covariance`: ``(P, P)`` in ``IDENT_UNKNOWN`` order; `chi2`: ``sum r^2`` at the
+      optimum (about ``2N - P`` when the sigmas are right); `n_data`: ``2N``.
+    - `iterations`: Levenberg-Marquardt iterations of the winning start.
+    """
+
+    estimate: dict
+    truth: dict
+    stderr: dict
+    covariance: np.ndarray
+    chi2: float
+    n_data: int
+    iterations: int
+    report: str
+
+
+def _ident_residual(x, data, sig, points):
+    # Whitened residuals r = (model - record) / sigma, rocker angles then crank torques.
+    full = {**_jnp(LOADED_FOURBAR.defaults), **dict(zip(IDENT_UNKNOWN, x))}
+    cols, status = design_columns(LOADED_FOURBAR, points, full)
+    r = jnp.concatenate([(cols["theta4[rad]"] - data[0]) / sig[0], (cols["torque[N m]"] - data[1]) / sig[1]])
+    return jnp.where(jnp.all(status == 0), r, jnp.nan)
+
+
+@functools.partial(jax.jit, static_argnums=(3,))
+def _ident_rj(x, data, sig, points):
+    # J = dr/dx column by column in forward mode: the positions' tangents come from the
+    # implicit function theorem (one linear solve per sample and parameter).
+    return _ident_residual(x, data, sig, points), jax.jacfwd(_ident_residual)(x, data, sig, points)
+
+
+def identify_fourbar(theta4, torque, *, sig_theta: float, sig_torque: float, truth: dict | None = None,
+                     starts: dict | None = None, max_iter: int = 50, xtol: float = 1e-10) -> Identification:
+    """Identify ``b``, ``c`` (m) and the damper coefficient ``k_v`` (N m s/rad) of
+    ``LOADED_FOURBAR`` from records of the rocker angle and the crank torque.
+
+    **Arguments**
+
+    - `theta4`, `torque`: ``(N,)`` records at the scene's ``N`` evenly spaced stroke samples
+      (rad, N m), with independent Gaussian noise of standard deviations `sig_theta`,
+      `sig_torque`.
+    - `truth`: for the report only.  `starts`: ``{name: (S,)}`` (default: 3 starts up to
+      30 % off the scene's defaults).  `max_iter`, `xtol`: Levenberg-Marquardt budget and
+      relative step tolerance.
+
+    **Method.**  Weighted least squares, ``min sum r^2`` with ``r`` the residuals divided by
+    their sigmas, by Levenberg-Marquardt (``(J^T J + mu diag J^T J) dx = -J^T r``) from every
+    start; ``J = dr/dp`` by forward-mode implicit differentiation through the stroke solve
+    and the virtual-power torque.  The standard errors are those of the Gauss-Newton
+    covariance ``(J^T J)^{-1}`` at the optimum (the sigmas are already in ``r``).
+
+    **Returns** an ``Identification``.  **Raises** ``ValueError`` for records of different
+    shapes; ``RuntimeError`` if no start converges.
+    """
+    theta4 = np.asarray(theta4, float)
+    torque = np.asarray(torque, float)
+    n = theta4.shape[0]
+    if theta4.ndim != 1 or torque.shape != (n,):
+        raise ValueError(f"identify_fourbar: theta4 and torque must have the same shape (N,), got {theta4.shape}, {torque.shape}")
+    if not (sig_theta > 0 and sig_torque > 0):
+        raise ValueError(f"identify_fourbar: sig_theta and sig_torque must be positive, got {sig_theta}, {sig_torque}")
+    d = LOADED_FOURBAR.defaults
+    if starts is None:
+        starts = {"b": d["b"] * np.array([1.05, 0.95, 1.08]), "c": d["c"] * np.array([0.95, 1.04, 1.08]),
+                  "k_v": d["k_v"] * np.array([1.3, 0.7, 1.1])}
+    data = (jnp.asarray(theta4), jnp.asarray(torque))
+    sig = jnp.asarray([sig_theta, sig_torque], float)
+    best = None
+    for i in range(len(starts[IDENT_UNKNOWN[0]])):
+        x = np.array([float(starts[k][i]) for k in IDENT_UNKNOWN])
+        r, J = (np.asarray(a) for a in _ident_rj(jnp.asarray(x), data, sig, n))
+        if not np.all(np.isfinite(r)):
+            continue
+        mu, it, converged = 1e-3, 0, False
+        for it in range(1, max_iter + 1):
+            A, g = J.T @ J, J.T @ r
+            dx = np.linalg.solve(A + mu * np.diag(np.diag(A)), -g)
+            r_new, J_new = (np.asarray(a) for a in _ident_rj(jnp.asarray(x + dx), data, sig, n))
+            if np.all(np.isfinite(r_new)) and r_new @ r_new <= r @ r:
+                x, r, J, mu = x + dx, r_new, J_new, mu / 3
+                if np.all(np.abs(dx) <= xtol * np.abs(x)):
+                    converged = True
+                    break
+            else:
+                mu *= 10
+        if converged and (best is None or r @ r < best[1] @ best[1]):
+            best = (x, r, J, it)
+    if best is None:
+        raise RuntimeError("identify_fourbar: no start converged")
+    x, r, J, it = best
+    cov = np.linalg.inv(J.T @ J)
+    est = dict(zip(IDENT_UNKNOWN, map(float, x)))
+    se = {k: float(np.sqrt(cov[i, i])) for i, k in enumerate(IDENT_UNKNOWN)}
+    chi2 = float(r @ r)
+    lines = [f"identify_fourbar: {IDENT_UNKNOWN} from {n} rocker angles (sigma {sig_theta:g} rad) and "
+             f"{n} crank torques (sigma {sig_torque:g} N m); chi2 = {chi2:.1f} for {2 * n - 3} degrees of freedom; "
+             f"Levenberg-Marquardt, {it} iterations"]
+    for k in IDENT_UNKNOWN:
+        t = "" if truth is None else f"  (true {truth[k]:.6g}: {(est[k] - truth[k]) / se[k]:+.2f} sigma)"
+        lines.append(f"  {k} = {est[k]:.8g} +- {se[k]:.3g}{t}")
+    return Identification(estimate=est, truth=dict(truth or {}), stderr=se, covariance=cov, chi2=chi2,
+                          n_data=2 * n, iterations=it, report="\n".join(lines))
