@@ -112,6 +112,16 @@ def time_python(fn: Callable, *args, repeat: int = 3, warmup: int = 1) -> Timing
     return _stats(samples)
 
 
+def pareto_front(points) -> list[tuple[float, float]]:
+    """The (time, error) points no other point beats on both: sorted by time, error falling."""
+    front, best = [], np.inf
+    for x, y in sorted(points):
+        if y < best:
+            front.append((x, y))
+            best = y
+    return front
+
+
 def peak_rss_mb() -> float:
     """Peak resident memory of this process so far (MiB)."""
     import resource

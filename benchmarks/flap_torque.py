@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import base_parser, compile_jax, setup_jax, time_call, time_python, write_result
+from benchmarks.common import base_parser, compile_jax, pareto_front, setup_jax, time_call, time_python, write_result
 
 ROOT = Path(__file__).resolve().parent.parent
 N_REF = 181  # reference points: every 0.25 deg of the 45 deg stroke
@@ -472,12 +472,7 @@ def plot(result, path):
         ax.plot([r["run_s"] for r in rs], [r["rel_err"] for r in rs], "^--", label=fam, ms=5)
         for r in rs:
             ax.annotate(str(r["steps"]), (r["run_s"], r["rel_err"]), fontsize=6)
-    pts = sorted((r["run_s"], r["rel_err"]) for r in rows + erows if r["rel_err"] and r.get("success_rate", 1.0) == 1.0)
-    front, best = [], np.inf
-    for x, y in pts:
-        if y < best:
-            front.append((x, y))
-            best = y
+    front = pareto_front((r["run_s"], r["rel_err"]) for r in rows + erows if r["rel_err"] and r.get("success_rate", 1.0) == 1.0)
     if front:
         ax.step(*zip(*front), where="post", color="k", lw=0.8, alpha=0.5, label="Pareto front (all samples converged)")
     ax.axhline(TARGET_JAXMECH, color="g", ls=":", lw=0.8)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.common import base_parser, compile_jax, setup_jax, time_call, write_result
+from benchmarks.common import base_parser, compile_jax, pareto_front, setup_jax, time_call, write_result
 from benchmarks.fourbar_reference import ALPHA, DESIGN, GUESS, OMEGA, closed_form_numpy
 
 
@@ -246,12 +246,7 @@ def plot(result, path):
             if "budget" in r:
                 ax.annotate(str(r["budget"]), (x, y), fontsize=6)
     # Pareto front over all rows (finite errors)
-    pts = sorted((r["ns_per_position"], r["pos_err_rad"]) for r in result["rows"] if r["pos_err_rad"] and np.isfinite(r["pos_err_rad"]))
-    front, best = [], np.inf
-    for x, y in pts:
-        if y < best:
-            front.append((x, y))
-            best = y
+    front = pareto_front((r["ns_per_position"], r["pos_err_rad"]) for r in result["rows"] if r["pos_err_rad"] and np.isfinite(r["pos_err_rad"]))
     if front:
         ax.step(*zip(*front), where="post", color="k", lw=0.8, alpha=0.5, label="Pareto front")
     ax.set_xscale("log"); ax.set_yscale("log")

@@ -678,6 +678,22 @@ def _chunk_plan(scene, points, options, anchors, names, d, chunk_size, budget):
     return mode, chunk, per
 
 
+def _mark_lost(errors: dict, s: int, e: int, exc: Exception) -> None:
+    """Record designs ``s..e-1`` as lost with their chunk (they keep a failure status)."""
+    for i in range(s, e):
+        errors[i] = f"lost with its chunk (designs {s}..{e - 1}): {type(exc).__name__}: {exc}"
+
+
+def _store_chunk(cols, status, d: int, points: int, s: int, e: int, c: dict, st):
+    """Write one chunk's columns and statuses into the result arrays (made on first use)."""
+    if cols is None:
+        cols, status = _empty_results(d, points, c)
+    for k, v in c.items():
+        cols[k][s:e] = v
+    status[s:e] = st
+    return cols, status
+
+
 def _empty_results(d, n, names):
     return {k: np.full((d, n), np.nan) for k in names}, np.full((d, n), int(Status.NONFINITE), np.int32)
 
@@ -695,16 +711,11 @@ def _sweep_local(scene, points, options, anchors, params, chunk_size, budget, pr
         try:
             c, st = _run_chunk(scene, points, options, anchors, mode, chunk, part)
         except Exception as exc:  # noqa: BLE001 - a failed chunk stops nothing else
-            for i in range(s, e):
-                errors[i] = f"lost with its chunk (designs {s}..{e - 1}): {type(exc).__name__}: {exc}"
+            _mark_lost(errors, s, e, exc)
             if cols is None and j == len(starts) - 1:
                 raise
             continue
-        if cols is None:
-            cols, status = _empty_results(d, points, c)
-        for k, v in c.items():
-            cols[k][s:e] = v
-        status[s:e] = st
+        cols, status = _store_chunk(cols, status, d, points, s, e, c, st)
         progress_bar.update(e, j + 1, len(starts))
     if cols is None:
         raise RuntimeError(f"sweep_scene: every chunk failed; first error: {next(iter(errors.values()))}")
@@ -766,14 +777,9 @@ def _sweep_dask(client, scene, points, options, anchors, params, chunk_size, bud
             try:
                 c, st = fut.result()
             except Exception as exc:  # noqa: BLE001 - a failed chunk stops nothing else
-                for i in range(s, e):
-                    errors[i] = f"lost with its chunk (designs {s}..{e - 1}): {type(exc).__name__}: {exc}"
+                _mark_lost(errors, s, e, exc)
                 continue
-            if cols is None:
-                cols, status = _empty_results(d, points, c)
-            for k, v in c.items():
-                cols[k][s:e] = v
-            status[s:e] = st
+            cols, status = _store_chunk(cols, status, d, points, s, e, c, st)
             done += e - s
             progress_bar.update(done, len(finished), len(starts))
     except TimeoutError:  # the remaining chunks are marked lost below
