@@ -216,7 +216,7 @@ def test_printed_torque_formula_differs_and_corrected_one_matches(result, refere
     k = int(np.argmax(np.abs(diff)))
     assert reference[0][k] == pytest.approx(305 * DEG, rel=1e-14)
     assert diff[k] == pytest.approx(851.7, abs=0.05)
-    assert diff[k] / T[k] == pytest.approx(0.273, abs=0.001)  # of the true torque (docs (d) 15 says 28.4 %)
+    assert diff[k] / T[k] == pytest.approx(0.273, abs=0.001)  # of the true torque (docs/seeds/flap_msd.md (d) 15)
     assert T_doc[0] == pytest.approx(1165.5428, abs=1e-4) and T_doc[30] == pytest.approx(2266.2763, abs=1e-4)
     T_fix = np.asarray(torque_document(result.params, result.motion, corrected=True))
     assert np.max(np.abs(T_fix - T) / np.abs(T)) < 1e-12

@@ -207,11 +207,11 @@ def test_eq5_is_right_as_a_function_of_theta(cs_motion):
 
 def test_eq5_on_the_wrong_theta(cs_motion):
     """§3.2 eq. 5 + Listing 1 line 17 + Fig. 7 (mistake 6): eq. 5 evaluated on the *linear* theta
-    of eq. 3 is not the derivative of the plotted theta: it integrates to 1.737910 rad = 99.58 deg
+    of eq. 3 is not the derivative of the plotted theta: it integrates to 1.737910 rad = 99.57 deg
     over 3 s, not 90 deg; at t = 1.5 s it plots 0.4977 rad/s where the true value is 0.4533."""
     ang = float(report_plotted_omega_angle())
     assert abs(ang - ref.document_angle_from_plotted_omega()) < 1e-10
-    # 99.5749 deg: the analysis (docs/seeds/landing_gear.md) rounds it to 99.58; 99.575 to 3 figures
+    # 99.5749 deg: the analysis (docs/seeds/landing_gear.md) gives it as 99.57 (99.5749)
     assert round(ang, 6) == 1.737910 and abs(np.degrees(ang) - 99.575) < 1e-3
     w = np.asarray(report_listing(jnp.asarray(T7))["omega"])
     assert round(w[3], 4) == 0.4977
