@@ -231,21 +231,38 @@ def bench_problem(problem):
     value = jax.jit(lambda p: objective(p)[0])
     value({k: float(v[0]) for k, v in starts.items()})  # compile
     nm_rows = []
+    trace = []  # (seconds since the Nelder-Mead runs began, best value so far)
     t0 = time.perf_counter()
+
+    def traced(x):
+        f = float(value(dict(zip(names, x))))
+        best = min(f, trace[-1][1]) if trace else f
+        trace.append((time.perf_counter() - t0, best))
+        return f
+
     for i in range(len(starts[names[0]])):
         x0 = [float(starts[k][i]) for k in names]
-        r = minimize(lambda x: float(value(dict(zip(names, x)))), x0, method="Nelder-Mead",
+        r = minimize(traced, x0, method="Nelder-Mead",
                      bounds=[bounds[k] for k in names], options={"xatol": 1e-10, "fatol": 1e-10, "maxfev": 4000})
         nm_rows.append({"value": float(r.fun), "evaluations": int(r.nfev)})
     nm_s = time.perf_counter() - t0
     nm_best = min(r["value"] for r in nm_rows)
+    # Time for Nelder-Mead (starts run one after another) to first reach the fit's objective
+    # within 1e-9 relative: the like-for-like comparison the issue asks for.
+    reach = target + 1e-9 * abs(target)
+    nm_reach = next((t for t, f in trace if f <= reach), None)
     row = {
         "problem": problem["name"],
         "starts": len(starts[names[0]]),
         "fit_lbfgs": {"first_call_s_with_compile": first, "run_s": fit_s, "best_value": target, "steps": res.steps.tolist(),
                       "reasons": [res.message(i) for i in range(len(res.value))]},
-        "nelder_mead": {"run_s": nm_s, "best_value": nm_best, "rows": nm_rows},
+        "nelder_mead": {"run_s": nm_s, "best_value": nm_best, "rows": nm_rows,
+                        "seconds_to_reach_fit_objective": nm_reach},
         "speedup_run": nm_s / fit_s,
+        "speedup_to_same_objective": (nm_reach / fit_s) if nm_reach is not None else None,
+        "note": "fit run_s excludes compilation (first_call_s_with_compile includes it); Nelder-Mead reuses one "
+                "compiled objective. seconds_to_reach_fit_objective is None if Nelder-Mead never got within 1e-9 "
+                "relative of the fit's objective.",
     }
     print(f"problem {problem['name']}: fit {fit_s:.2f} s (f = {target:.10g}), Nelder-Mead {nm_s:.2f} s (f = {nm_best:.10g})", flush=True)
     return row

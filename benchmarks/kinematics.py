@@ -5,10 +5,8 @@ in one run:
 
 - ``closed_jax``: the closed form, jitted and vmapped (the speed limit);
 - ``closed_numpy``: the same closed form in numpy;
-- ``jaxmech``: ``stroke_kinematics`` (continuation solve + implicit derivatives), jitted;
-- ``jaxmech_lean``: a measured prototype of a fast path (fixed 3-step Newton from the
-  continuation guess, then the implicit-function derivatives written out once); not part
-  of the library, it shows what a fast path could gain;
+- ``jaxmech``: ``stroke_kinematics`` (continuation solve + implicit derivatives in one
+  compiled pass), jitted together with the scaling to time derivatives;
 - ``optimistix``: ``optx.root_find`` with ``optx.Newton``, vmapped, guessed with the previous
   position's exact solution (a continuation-quality guess), derivatives by its implicit rule;
 - ``fsolve``: ``scipy.optimize.fsolve`` per position with continuation (the seeds' method);
@@ -69,38 +67,12 @@ def _jax_methods():
         return sol.q, qd, qdd, sol.status
 
     def jaxmech_designs(us, p, guess):
-        # D designs x N positions: continuation per design, implicit derivatives vmapped twice.
-        sol = jm.solve_stroke(mech, us, p, guess)
-        uu = jnp.broadcast_to(us[None, :, None], sol.q.shape[:2] + (1,))
-        d1, d2 = jax.vmap(jax.vmap(lambda q, u, pp: jm.input_derivatives(mech, q, u, pp), in_axes=(0, 0, None)))(sol.q, uu, p)
+        # D designs x N positions: continuation per design, derivatives in the same pass.
+        sol, d1, d2 = jm.stroke_kinematics(mech, us, p, guess)
         q1, q2 = d1[..., 0], d2[..., 0, 0]
         return sol.q, q1 * OMEGA, q1 * ALPHA + q2 * OMEGA**2, sol.status
 
-    def lean_one(u, p, g):
-        # Prototype fast path: fixed Newton budget (no while_loop), IFT derivatives once.
-        res = lambda q, uu: mech.residual(q, uu[None], p)  # noqa: E731
-        q = g
-        for _ in range(3):
-            q = q - _solve2(jax.jacfwd(res)(q, u), res(q, u))
-        J = jax.jacfwd(res)(q, u)
-        ru = jax.jacfwd(res, 1)(q, u)
-        q1 = -_solve2(J, ru)
-        # second order: d2/ds2 Phi(q + s q1, u + s) at s = 0 (then q2 = -J^-1 of it)
-        g2 = jax.jvp(lambda s: jax.jvp(lambda t: res(q + t * q1, u + t), (s,), (1.0,))[1], (0.0,), (1.0,))[1]
-        q2 = -_solve2(J, g2)
-        r = jnp.linalg.norm(res(q, u)) / mech.length_scale(p)
-        ok = r < 1e-12
-        nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
-        return nan(q), nan(q1 * OMEGA), nan(q1 * ALPHA + q2 * OMEGA**2)
-
-    def _solve2(a, b):
-        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        return jnp.stack([(a[1, 1] * b[0] - a[0, 1] * b[1]) / det, (a[0, 0] * b[1] - a[1, 0] * b[0]) / det])
-
-    def jaxmech_lean(us, p, guess_stroke):
-        return jax.vmap(lambda u, g: lean_one(u, p, g))(us, guess_stroke)
-
-    return jax, jnp, jm, mech, closed_jax, jaxmech_one, jaxmech_designs, jaxmech_lean
+    return jax, jnp, jm, mech, closed_jax, jaxmech_one, jaxmech_designs
 
 
 def _optimistix_fn(jax, jnp, mech):
@@ -220,7 +192,7 @@ def _mechanism_pkg(us, p):
 # --------------------------------------------------------------------------- the run
 def run(quick: bool = False) -> dict:
     setup_jax(True)
-    jax, jnp, jm, mech, closed_jax, jaxmech_one, jaxmech_designs, jaxmech_lean = _jax_methods()
+    jax, jnp, jm, mech, closed_jax, jaxmech_one, jaxmech_designs = _jax_methods()
     optx_batched = _optimistix_fn(jax, jnp, mech)
     sizes = [10**3, 10**4] if quick else [10**3, 10**5, 10**6]
     d_designs, n_per = (100, 100) if quick else (1000, 1000)
@@ -254,12 +226,6 @@ def run(quick: bool = False) -> dict:
         # solvers that take one guess per position
         prev = np.stack([np.roll(ref[0], 1), np.roll(ref[1], 1)], -1)  # (wraps: a full turn)
         gs = jnp.asarray(prev)
-        f, ct = compile_jax(jaxmech_lean, us, p, gs)
-        t = time_call(f, us, p, gs, repeat=repeat)
-        q, qd, qdd = map(np.asarray, f(us, p, gs))
-        rows.append(_row("jaxmech_lean (prototype)", n, t, ct, _errors(q[:, 0], q[:, 1], qd[:, 0], qd[:, 1], qdd[:, 0], qdd[:, 1], ref),
-                         success_rate=float(np.mean(np.isfinite(q[:, 0])))))
-
         try:
             f, ct = compile_jax(optx_batched, us, p, gs)
             t = time_call(f, us, p, gs, repeat=max(2, repeat // 2))
@@ -332,13 +298,6 @@ def run(quick: bool = False) -> dict:
     uflat = jnp.asarray(np.broadcast_to(us_np, (d_designs, n_per)).ravel())
     pflat = {k: jnp.asarray(np.repeat(v, n_per)) for k, v in des.items()}
 
-    def lean_designs(u, p, g):
-        return jax.vmap(lambda u_, p_, g_: jaxmech_lean(u_[None], p_, g_[None]))(u, p, g)
-
-    f, ct = compile_jax(lean_designs, uflat, pflat, gs)
-    t = time_call(f, uflat, pflat, gs, repeat=repeat)
-    q, qd, qdd = (np.asarray(x).reshape(d_designs, n_per, 2) for x in f(uflat, pflat, gs))
-    rows.append(_row("jaxmech_lean (prototype)", n_tot, t, ct, _errors(q[..., 0], q[..., 1], qd[..., 0], qd[..., 1], qdd[..., 0], qdd[..., 1], ref), case="designs"))
     try:
         def optx_designs(u, p, g):
             return jax.vmap(lambda u_, p_, g_: optx_batched(u_[None], p_, g_[None]))(u, p, g)
@@ -387,12 +346,12 @@ def _ratios(rows):
         if r["method"] != "jaxmech":
             continue
         cl = [c for c in rows if c["method"] == "closed_jax" and c["case"] == r["case"] and c["n_positions"] == r["n_positions"]]
-        lean = [c for c in rows if c["method"].startswith("jaxmech_lean") and c["case"] == r["case"] and c["n_positions"] == r["n_positions"]]
+        pyl = [c for c in rows if c["method"] == "pylinkage_step_fast" and c["case"] == r["case"] and (c["n_positions"] == r["n_positions"] or c.get("subsample"))]
         out.append({
             "case": r["case"], "n_positions": r["n_positions"],
             "jaxmech_over_closed_jax": r["ns_per_position"] / cl[0]["ns_per_position"] if cl else None,
             "fsolve_over_jaxmech": fs_ns / r["ns_per_position"],
-            "lean_over_closed_jax": lean[0]["ns_per_position"] / cl[0]["ns_per_position"] if (lean and cl) else None,
+            "pylinkage_over_jaxmech": pyl[0]["ns_per_position"] / r["ns_per_position"] if pyl else None,
         })
     return out
 

@@ -44,10 +44,10 @@ def kinematics_table(doc) -> str:
         sub = " (subsample)" if r.get("subsample") else ""
         lines.append(f"| {r['case']} | {r['method']}{sub} | {r['n_positions']:,} | {_f(r['ns_per_position'], '{:,.0f}')} | "
                      f"{_f(r['compile_s'], '{:.2f}')} | {_f(r['pos_err_rad'], '{:.1e}')} | {_f(r['vel_err'], '{:.1e}')} | {_f(r['acc_err'], '{:.1e}')} |")
-    lines += ["", "| case | positions | jaxmech / closed form (JAX) | fsolve / jaxmech | lean prototype / closed form |", "|---|---:|---:|---:|---:|"]
+    lines += ["", "| case | positions | jaxmech / closed form (JAX) | fsolve / jaxmech | pylinkage / jaxmech |", "|---|---:|---:|---:|---:|"]
     for r in doc.get("ratios", []):
         lines.append(f"| {r['case']} | {r['n_positions']:,} | {_f(r['jaxmech_over_closed_jax'], '{:.1f}x')} | "
-                     f"{_f(r['fsolve_over_jaxmech'], '{:.0f}x')} | {_f(r.get('lean_over_closed_jax'), '{:.1f}x')} |")
+                     f"{_f(r['fsolve_over_jaxmech'], '{:.0f}x')} | {_f(r.get('pylinkage_over_jaxmech'), '{:.1f}x')} |")
     if doc.get("notes"):
         lines += ["", "Notes: " + "; ".join(f"{k}: {v}" for k, v in doc["notes"].items())]
     return "\n".join(lines)

@@ -19,8 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from .mechanism import Mechanism
-from .solve import Solution, SolverOptions, _as_inputs, _solve_small, implicit_root, solve_stroke
-from .status import Status
+from .solve import Solution, SolverOptions, _derivatives_at, _stroke, implicit_root, solve_stroke
 
 __all__ = [
     "ConstantSpeed",
@@ -100,27 +99,8 @@ def input_derivatives(mech: Mechanism, q, u, p):
     Shapes ``(m, dof)`` and ``(m, dof, dof)``; units rad (or m) per unit input.  Samples
     with NaN positions give zeros (mask them by status).
     """
-    m, dof = mech.m, mech.dof
     ok = jnp.all(jnp.isfinite(q))
-    q_s = jnp.where(ok, q, jnp.zeros_like(q))
-    jq = jax.jacfwd(mech.residual, 0)(q_s, u, p)
-    jq = jnp.where(ok, jq, jnp.eye(m, dtype=jq.dtype))
-    ju = jax.jacfwd(mech.residual, 1)(q_s, u, p)
-    d1 = -jax.vmap(lambda c: _solve_small(jq, c), in_axes=1, out_axes=1)(ju)
-    dirs = jnp.concatenate([d1, jnp.eye(dof, dtype=d1.dtype)], axis=0)  # columns x_j in (q, u)
-
-    def phi(x):
-        return mech.residual(q_s + x[:m], u + x[m:], p)
-
-    zero = jnp.zeros(m + dof, d1.dtype)
-
-    def second(xj, xk):
-        return jax.jvp(lambda a: jax.jvp(phi, (a,), (xk,))[1], (zero,), (xj,))[1]
-
-    hess = jax.vmap(lambda xj: jax.vmap(lambda xk: second(xj, xk), in_axes=1, out_axes=1)(dirs), in_axes=1, out_axes=1)(dirs)
-    d2 = -jax.vmap(jax.vmap(lambda c: _solve_small(jq, c), in_axes=1, out_axes=1), in_axes=2, out_axes=2)(hess)
-    zero_if = lambda x: jnp.where(ok, x, jnp.zeros_like(x))  # noqa: E731
-    return zero_if(d1), zero_if(d2)
+    return _derivatives_at(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
 
 
 def time_derivatives(fn: Callable, t):
@@ -254,21 +234,11 @@ def motion(
 
 
 def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
-    """Positions and per-unit-input derivatives over a stroke ``us`` (one design).
+    """Positions and per-unit-input derivatives over a stroke ``us``, for one design or a
+    batch of designs (``p`` leaves of shape ``(D,)``), in one compiled pass.
 
-    **Returns** ``(solution, dq_du (N, m, dof), d2q_du2 (N, m, dof, dof))``; NaN where the
-    status is not ``CONVERGED``.
+    **Returns** ``(solution, dq_du (..., N, m, dof), d2q_du2 (..., N, m, dof, dof))``; NaN
+    where the status is not ``CONVERGED``.  The derivatives are those of ``input_derivatives``
+    (differentiable again in ``u`` and ``p``), computed together with the solve.
     """
-    sol = solve_stroke(mech, us, p, guess, options=options, anchors=anchors)
-    u = _as_inputs(mech, jnp.asarray(us, sol.q.dtype), "us")
-    pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
-    d1, d2 = _derivs_batch(mech, sol.q, u, pj)
-    ok = (sol.status == Status.CONVERGED)
-    d1 = jnp.where(ok[:, None, None], d1, jnp.nan)
-    d2 = jnp.where(ok[:, None, None, None], d2, jnp.nan)
-    return sol, d1, d2
-
-
-@functools.partial(jax.jit, static_argnums=(0,))
-def _derivs_batch(mech, q, u, p):
-    return jax.vmap(lambda q_, u_: input_derivatives(mech, q_, u_, p))(q, u)
+    return _stroke(mech, us, p, guess, options, anchors, derivs=True)

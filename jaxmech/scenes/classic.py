@@ -12,7 +12,8 @@ __all__ = ["FOURBAR", "SLIDER_CRANK", "fourbar_mechanism", "slider_crank_mechani
 
 #: Four-bar: crank a at O2 (angle theta2), coupler b (theta3), rocker c at O4 (theta4),
 #: ground d along +x.  Loop: a e^{i theta2} + b e^{i theta3} - c e^{i theta4} - d = 0.
-#: Branch indicator sin(theta4 - theta3): positive is the "open" assembly.
+#: Branch indicator sin(theta4 - theta3): positive is the "open" assembly.  Written as
+#: Im(conj(e^{i theta3}) e^{i theta4}) it reuses the loop's own cos/sin (no extra sine).
 fourbar_mechanism = Mechanism(
     name="fourbar",
     coords=("theta3", "theta4"),
@@ -26,7 +27,7 @@ fourbar_mechanism = Mechanism(
         "B": lambda q, u, p: p.d + p.c * cis(q.theta4),
         "P": lambda q, u, p: p.a * cis(u.theta2) + 0.5 * p.b * cis(q.theta3),
     },
-    branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+    branch=lambda q, u, p: jnp.imag(jnp.conj(cis(q.theta3)) * cis(q.theta4)),
 )
 
 #: Offset slider-crank: crank a (theta2), rod b (theta3), slider at x + i e on a line
@@ -44,7 +45,7 @@ slider_crank_mechanism = Mechanism(
         "A": lambda q, u, p: p.a * cis(u.theta2),
         "B": lambda q, u, p: q.x + 1j * p.e,
     },
-    branch=lambda q, u, p: jnp.cos(q.theta3),
+    branch=lambda q, u, p: jnp.real(cis(q.theta3)),
 )
 
 
