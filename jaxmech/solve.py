@@ -104,8 +104,9 @@ class Solution:
 # Per-sample systems are tiny (m = 1..8) and run under vmap over up to 1e6 samples.  XLA's
 # CPU batched LAPACK path is ~12x slower per sample than straight-line code, and reductions
 # over a size-m axis end an XLA fusion (everything feeding them is recomputed in the next
-# one), so small sizes are unrolled into elementwise operations.
-_UNROLL_MAX = 8
+# one), so small sizes are unrolled into elementwise operations.  Up to 4x4: unrolling a
+# 6x6 elimination (flap_msd) added ~8 s of compile per function for no measurable gain.
+_UNROLL_MAX = 4
 
 
 def _small_max(x):
@@ -128,7 +129,7 @@ def _small_norm(x):
 
 
 def _gauss_small(a, b):
-    """Gaussian elimination with partial pivoting, written out for ``n <= _UNROLL_MAX``.
+    """Gaussian elimination with partial pivoting, written out for ``3 <= n <= _UNROLL_MAX``.
 
     `b` is ``(n,)`` or ``(n, k)``.  Row swaps are selects, so the whole solve is one
     straight-line elementwise program under vmap.  ``a`` and ``b`` are eliminated side by
@@ -158,10 +159,41 @@ def _gauss_small(a, b):
     return out[:, 0] if vec else out
 
 
+def _gauss_loop(a, b):
+    """Gaussian elimination with partial pivoting as a ``fori_loop`` over columns, for
+    ``n > _UNROLL_MAX``: compact to compile, elementwise under vmap (no batched LAPACK
+    call; those were seen to hang the jaxlib 0.10 CPU runtime in large batched loops).
+    ``a`` and ``b`` are eliminated side by side so the solve stays linear in ``b``.
+    """
+    n = a.shape[-1]
+    vec = b.ndim == 1
+    rhs = b.reshape(n, -1)
+    rows = jnp.arange(n)
+
+    def eliminate(k, state):
+        m, r = state
+        col = jnp.where(rows >= k, jnp.abs(m[:, k]), -1.0)
+        piv = jnp.argmax(col)
+        perm = rows.at[k].set(piv).at[piv].set(k)
+        m, r = m[perm], r[perm]
+        f = jnp.where(rows > k, m[:, k] / m[k, k], 0.0)
+        return m - f[:, None] * m[k][None, :], r - f[:, None] * r[k][None, :]
+
+    m, r = jax.lax.fori_loop(0, n, eliminate, (a, rhs))
+
+    def substitute(j, x):
+        i = n - 1 - j
+        xi = (r[i] - m[i] @ x) / m[i, i]  # x[i:] rows not yet set are zero
+        return x.at[i].set(xi)
+
+    x = jax.lax.fori_loop(0, n, substitute, jnp.zeros_like(r))
+    return x[:, 0] if vec else x
+
+
 def _solve_small(a, b):
     """Solve ``a x = b`` for one small dense system (``b`` of shape ``(n,)`` or ``(n, k)``).
 
-    Cramer's rule for 1x1 and 2x2, unrolled elimination up to 8x8, LAPACK beyond.
+    Cramer's rule for 1x1 and 2x2, unrolled elimination up to ``_UNROLL_MAX``, a loop beyond.
     """
     n = a.shape[-1]
     if n == 1:
@@ -173,14 +205,11 @@ def _solve_small(a, b):
         return jnp.stack([x0, x1])
     if n <= _UNROLL_MAX:
         return _gauss_small(a, b)
-    return jnp.linalg.solve(a, b)
+    return _gauss_loop(a, b)
 
 
 def _inv_small(a):
-    n = a.shape[-1]
-    if n <= _UNROLL_MAX:
-        return _solve_small(a, jnp.eye(n, dtype=a.dtype))
-    return jnp.linalg.inv(a)
+    return _solve_small(a, jnp.eye(a.shape[-1], dtype=a.dtype))
 
 
 def _materialize(*xs):
@@ -620,39 +649,49 @@ def _anchor_step(n: int, n_anchors: int) -> int:
     return max(1, -(-n // max(1, n_anchors)))
 
 
-def _stroke_anchors(mech: Mechanism, options: SolverOptions, k: int, us, p, guess):
-    """Anchors of one stroke ``us (N, dof)`` of one design, solved in sequence (no gradients).
+def _stroke_anchors(mech: Mechanism, options: SolverOptions, k: int, us, ps, guess):
+    """Anchors of the strokes of D designs (``ps`` leaves ``(D,)``, ``guess (D, m)``), solved
+    in sequence along ``us (N, dof)`` (no gradients).
 
-    Anchors (every k-th input and the last) are solved by the robust Newton, each guessed by
-    the second-order predictor from the previous anchor, which keeps the branch.  Returns
-    ``((q, dq/du, d2q/du2, u) at each anchor, b0)`` with ``b0`` the stroke's branch sign
-    (its first guess's); ``_stroke_guess`` turns them into a guess for any point.
+    Anchors (every k-th input and the last) are solved by the robust Newton from the
+    second-order predictor of the previous anchor, which keeps the branch.  (Trying plain
+    Newton steps first, with the robust loop under a ``lax.cond``, cut the anchors' time
+    by 30% for 1e3 designs but added ~2 s to every compile.)  Returns
+    ``((q, dq/du, d2q/du2, u) at each anchor, each (D, A, ...)), b0 (D,))`` with ``b0`` the
+    stroke's branch sign (its first guess's); ``_stroke_guesses`` turns them into a guess
+    for any point.
     """
     n = us.shape[0]
     m, dof = mech.m, mech.dof
+    d = guess.shape[0]
     idx = np.unique(np.concatenate([np.arange(0, n, k), [n - 1]]))
     ua = us[idx]
     # A large step can carry the predictor across the branch boundary, where Newton then
     # converges (per its own guess) on the other branch; so every anchor is checked against
     # the stroke's branch.
-    b0 = jnp.sign(mech.branch_value(guess, us[0], p)) if mech.branch is not None else jnp.zeros((), guess.dtype)
+    if mech.branch is not None:
+        b0 = jnp.sign(jax.vmap(lambda g_, p_: mech.branch_value(g_, us[0], p_))(guess, ps))
+    else:
+        b0 = jnp.zeros((d,), guess.dtype)
+    on_branch = jax.vmap(lambda b_, q_, u_, p_: _on_branch(mech, b_, q_, u_, p_), (0, 0, None, 0))
 
     def scan_fn(carry, u_next):
         q, d1, d2, u_prev = carry
-        g = _predict(q, d1, d2, u_next - u_prev)
-        g = jnp.where(_on_branch(mech, b0, g, u_next, p), g, q)  # a predictor off the branch: fall back to q
-        qn, status, *_ = _newton(mech, options, u_next, p, g)
-        good = (status == Status.CONVERGED) & _on_branch(mech, b0, qn, u_next, p)
-        e1, e2 = _derivatives_at(mech, jnp.where(good, qn, q), u_next, p, good)
+        g = jax.vmap(_predict)(q, d1, d2, u_next - u_prev)
+        g = jnp.where(on_branch(b0, g, u_next, ps)[:, None], g, q)  # a predictor off the branch: fall back to q
+        qn, status, *_ = jax.vmap(lambda p_, g_: _newton(mech, options, u_next, p_, g_))(ps, g)
+        good = (status == Status.CONVERGED) & on_branch(b0, qn, u_next, ps)
+        e1, e2 = jax.vmap(lambda q_, p_, g_: _derivatives_at(mech, q_, u_next, p_, g_))(jnp.where(good[:, None], qn, q), ps, good)
         # After a failure keep the last good anchor: later anchors restart from it.
-        carry = (jnp.where(good, qn, q), jnp.where(good, e1, d1), jnp.where(good, e2, d2), jnp.where(good, u_next, u_prev))
+        keep = lambda new, old: jnp.where(good.reshape((d,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
+        carry = (keep(qn, q), keep(e1, d1), keep(e2, d2), keep(jnp.broadcast_to(u_next, u_prev.shape), u_prev))
         return carry, carry
 
     # The first anchor is solved from the user's guess (zero derivatives: the predictor is
     # the guess itself); one traced Newton serves every anchor, which halves compile time.
-    init = (guess, jnp.zeros((m, dof), guess.dtype), jnp.zeros((m, dof, dof), guess.dtype), ua[0])
+    init = (guess, jnp.zeros((d, m, dof), guess.dtype), jnp.zeros((d, m, dof, dof), guess.dtype), jnp.broadcast_to(ua[0], (d, dof)))
     _, anchors = jax.lax.scan(scan_fn, init, ua)
-    return anchors, b0
+    return tuple(jnp.moveaxis(x, 0, 1) for x in anchors), b0
 
 
 def _stroke_guesses(anchors, k: int, us):
@@ -679,22 +718,19 @@ def _stroke_guesses(anchors, k: int, us):
     return g, q0
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3, 4, 5))
-def _stroke_batch(mech, options, n_anchors, derivs, single, lean_only, us, p, guess):
+@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3, 4))
+def _stroke_batch(mech, options, n_anchors, derivs, single, us, p, guess):
     """Strokes of D designs: ``p`` leaves ``(D,)``, ``guess (D, m)``; ``(D, N)`` fields
     (``(N,)`` fields with ``single``, D = 1).
 
     Every point is first solved by ``options.lean_steps`` plain Newton steps from its
     anchor's predictor (``_lean_newton``); only if some point of the whole batch fails that
     test is the robust damped Newton run (one batch-level ``lax.cond``, so a clean batch
-    never pays for it).  With ``lean_only`` there is no fallback: the function returns the
-    fast path's results and whether any point failed, and the caller (``_stroke``, outside
-    any trace) runs the full version only then.  This saves the cost of routing every
-    output through the ``cond`` (measured ~20% of the four-bar stroke on CPU).  With ``derivs``, ``dq/du`` and ``d2q/du2`` are computed in the same
+    never pays for it).  With ``derivs``, ``dq/du`` and ``d2q/du2`` are computed in the same
     pass, at the fast path's last iterate, sharing its Jacobian's sines and cosines.
 
-    Returns ``((Solution, d1, d2), any_failed)`` (``d1``, ``d2`` None without ``derivs``;
-    NaN where the status is not ``CONVERGED``).
+    Returns ``(Solution, d1, d2)`` (``d1``, ``d2`` None without ``derivs``; NaN where the
+    status is not ``CONVERGED``).
     """
     stop = jax.lax.stop_gradient
     n = us.shape[0]
@@ -709,7 +745,7 @@ def _stroke_batch(mech, options, n_anchors, derivs, single, lean_only, us, p, gu
     p_s = {k: jnp.where(jnp.isfinite(v), v, 1.0) for k, v in p.items()}
     ps = jax.tree_util.tree_map(stop, p_s)
     k = _anchor_step(n, n_anchors)
-    anchors, b0 = jax.vmap(lambda p_, g_: _stroke_anchors(mech, options, k, us_s, p_, g_))(ps, stop(guess))
+    anchors, b0 = _stroke_anchors(mech, options, k, us_s, ps, stop(guess))
     inputs_ok = p_fin[:, None] & us_fin[None, :] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
     guesses, starts = jax.vmap(lambda a_: _stroke_guesses(a_, k, us_s))(anchors)
 
@@ -768,13 +804,9 @@ def _stroke_batch(mech, options, n_anchors, derivs, single, lean_only, us, p, gu
         return finish(tuple(pick(a, b) for a, b in zip(fields, new)))
 
     fields = (qf, status, steps, rn, cond, br, d1, d2)
-    failed = jnp.any(~ok)
-    if lean_only:
-        q, status, steps, rn, cond, br, d1, d2 = finish(fields)
-    else:
-        q, status, steps, rn, cond, br, d1, d2 = jax.lax.cond(failed, fallback, finish, fields)
+    q, status, steps, rn, cond, br, d1, d2 = jax.lax.cond(jnp.any(~ok), fallback, finish, fields)
     sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, coords=mech.coords)
-    return (sol, d1, d2), failed
+    return sol, d1, d2
 
 
 def _stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, anchors: int, derivs: bool):
@@ -791,13 +823,7 @@ def _stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, anch
     d = 1 if single else shape[0]
     pf = {k: jnp.broadcast_to(v, (d,)) for k, v in p.items()}
     gf = jnp.broadcast_to(guess, (d, mech.m))
-    static = (mech, options, int(anchors), bool(derivs), single)
-    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((us_, pf, gf)))
-    if not traced:
-        out, failed = _stroke_batch(*static, True, us_, pf, gf)
-        if not bool(failed):
-            return out
-    return _stroke_batch(*static, False, us_, pf, gf)[0]
+    return _stroke_batch(mech, options, int(anchors), bool(derivs), single, us_, pf, gf)
 
 
 def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int = 256, throw: bool = False) -> Solution:

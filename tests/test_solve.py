@@ -294,3 +294,70 @@ def test_two_loop_sixbar_stroke_closes_and_derivatives():
     i = 300
     fd = central_diff(lambda t: jm.solve(sixbar_mechanism, t, SIXBAR_P, sol.q[i]).q, th[i], h=1e-3)
     np.testing.assert_allclose(np.asarray(d1[i, :, 0]), fd, rtol=1e-9, atol=1e-11)
+
+
+# ----------------------------------------------------------------------------- fast path internals
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 6, 9])
+def test_small_solves_and_condition_numbers_match_numpy(n):
+    """The unrolled (n <= 4) and looped (n > 4) eliminations against LAPACK via numpy."""
+    from jaxmech.solve import _cond1, _solve_small
+
+    rng = _rng(n)
+    a = rng.normal(size=(n, n)) + 0.5 * n * np.eye(n)
+    a[[0, -1]] = a[[-1, 0]]  # the largest entries off the diagonal: pivoting is exercised
+    b, bb = rng.normal(size=n), rng.normal(size=(n, 3))
+    np.testing.assert_allclose(np.asarray(_solve_small(jnp.asarray(a), jnp.asarray(b))), np.linalg.solve(a, b), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(_solve_small(jnp.asarray(a), jnp.asarray(bb))), np.linalg.solve(a, bb), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(float(_cond1(jnp.asarray(a))), np.linalg.cond(a, 1), rtol=1e-10)
+    if n in (3, 6):  # the unrolled and the looped elimination, both differentiated
+        check_grads(lambda a_, b_: _solve_small(a_, b_), (jnp.asarray(a), jnp.asarray(b)), order=1, modes=("fwd", "rev"))
+
+
+def _toggle_stroke():
+    """A non-Grashof four-bar whose crank cannot turn fully (b + c = 4.2 is reached at
+    theta2 = 2.25 rad): the end of the stroke is infeasible."""
+    p = {"a": 1.0, "b": 2.0, "c": 2.2, "d": 3.5}
+    th = np.linspace(1.5, 3.0, 2001)
+    t3, t4 = fourbar_closed(th[0], **p)
+    return th, p, jnp.array([t3, t4])
+
+
+def test_fast_path_and_robust_fallback_agree():
+    """Points accepted by the fast path (one Newton step from the anchor predictor,
+    derivatives at that iterate) against the robust loop for every point (``lean_steps=0``
+    never passes the fast test from a predictor), on a clean stroke and on one with
+    infeasible points: same statuses, positions to 1e-13, derivatives to 1e-9."""
+    robust = jm.SolverOptions(lean_steps=0)
+    # both strokes have 2001 points: one compiled function per option set serves both
+    for th, p, g in [(np.linspace(0.0, 2 * np.pi, 2001), {"a": 1.0, "b": 3.0, "c": 2.5, "d": 3.5}, jnp.array([0.2, 1.2])), _toggle_stroke()]:
+        fast = jm.stroke_kinematics(FB, th, p, g)
+        slow = jm.stroke_kinematics(FB, th, p, g, options=robust)
+        assert np.any(np.asarray(slow[0].steps) > 0)  # the robust loop did the work
+        np.testing.assert_array_equal(np.asarray(fast[0].status), np.asarray(slow[0].status))
+        for x, y, tol in [(fast[0].q, slow[0].q, 1e-13), (fast[1], slow[1], DERIV_RTOL), (fast[2], slow[2], DERIV_RTOL)]:
+            np.testing.assert_array_equal(np.isnan(np.asarray(x)), np.isnan(np.asarray(y)))
+            np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=tol, atol=tol)
+    st = np.asarray(fast[0].status)
+    assert (st == jm.Status.CONVERGED).any() and (st == jm.Status.INFEASIBLE).any()
+
+
+def test_stroke_kinematics_accuracy_and_parameter_gradient():
+    """Fast-path velocities and accelerations against the closed form, and the gradient of
+    a figure built from them (through the implicit function theorem at the fast path's
+    iterate) against sixth-order central differences."""
+    p = {"a": 1.0, "b": 3.0, "c": 2.5, "d": 3.5}
+    th = np.linspace(0.0, 2 * np.pi, 2001)
+    sol, d1, d2 = jm.stroke_kinematics(FB, th, p, jnp.array([0.2, 1.2]))
+    assert np.all(np.asarray(sol.steps) == jm.SolverOptions().lean_steps)  # the fast path took every point
+    grad_closed = jax.vmap(jax.grad(lambda t: fourbar_closed(t, **p)[1]))
+    hess_closed = jax.vmap(jax.grad(jax.grad(lambda t: fourbar_closed(t, **p)[1])))
+    np.testing.assert_allclose(np.asarray(d1[:, 1, 0]), np.asarray(grad_closed(jnp.asarray(th))), rtol=DERIV_RTOL, atol=DERIV_RTOL)
+    np.testing.assert_allclose(np.asarray(d2[:, 1, 0, 0]), np.asarray(hess_closed(jnp.asarray(th))), rtol=DERIV_RTOL, atol=DERIV_RTOL)
+
+    def figure(c):
+        _, e1, e2 = jm.stroke_kinematics(FB, th, {**p, "c": c}, jnp.array([0.2, 1.2]))
+        return jnp.sum(e1[:, 1, 0] ** 2) + jnp.sum(e2[:, 0, 0, 0])
+
+    _, g = jax.jvp(figure, (2.5,), (1.0,))  # forward mode; reverse mode: test_check_grads_...
+    fd = central_diff(lambda c: float(figure(c)), 2.5, h=1e-3)
+    np.testing.assert_allclose(float(g), fd, rtol=1e-7)
