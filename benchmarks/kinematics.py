@@ -13,7 +13,10 @@ in one run:
   velocities and accelerations by the 2x2 linear solves; timed on a subsample;
 - ``pylinkage``: ``Linkage.step_fast_with_kinematics`` (numba), pylinkage's fastest path;
 - ``mechanism``: the ``mechanism`` PyPI package's ``Mechanism.iterate`` (fsolve for position,
-  velocity and acceleration), on a subsample.
+  velocity and acceleration), on a subsample;
+- ``exudyn``: the four-bar as three rigid bodies and four revolute joints in Exudyn, the crank
+  angle prescribed, implicit generalized-alpha over one crank turn at several step counts
+  (time stepping, the way the flap report used MBDyn).
 
 Each row: median time per position (ns), compile time (s) separately, and the max error
 against the numpy closed form in positions (rad), velocities (rad/s), accelerations (rad/s^2).
@@ -163,6 +166,78 @@ def _pylinkage_angles(pos, vel, acc, d):
     return th2, (t3, t4, w3, w4, al3, al4)
 
 
+def _exudyn_fourbar(n_steps, p=DESIGN, turn=2 * np.pi, spectral_radius=0.9):
+    """The four-bar in Exudyn: crank, coupler, rocker as ObjectRigidBody2D (1 kg, 0.1 kg m^2,
+    centred on each link), four ObjectJointRevolute2D, the crank angle prescribed as
+    theta2(t) = OMEGA t + ALPHA t^2 / 2 by a CoordinateConstraint; implicit generalized-alpha
+    (index 3) over the time to turn the crank by `turn`.  Returns (t, theta2, w2, (t3, t4, w3, w4, al3, al4), solve_s)."""
+    import warnings
+
+    import exudyn as exu
+    from exudyn.itemInterface import (CoordinateConstraint, MarkerBodyPosition, MarkerNodeCoordinate, NodePointGround,
+                                      NodeRigidBody2D, ObjectGround, ObjectJointRevolute2D, ObjectRigidBody2D, SensorNode)
+    a, b, c, d = (p[k] for k in "abcd")
+    T = (-OMEGA + np.sqrt(OMEGA**2 + 2 * ALPHA * turn)) / ALPHA  # OMEGA T + ALPHA T^2 / 2 = turn
+    t3, t4, w3, w4, _, _ = (float(np.ravel(x)[0]) for x in closed_form_numpy(np.array([0.0]), **p, w2=OMEGA, al2=ALPHA))
+    A = a + 0j
+    B = A + b * np.exp(1j * t3)
+    O4 = d + 0j
+    SC = exu.SystemContainer()
+    mbs = SC.AddSystem()
+    ground = mbs.AddObject(ObjectGround(referencePosition=[0.0, 0.0, 0.0]))
+
+    def gmarker(z):
+        return mbs.AddMarker(MarkerBodyPosition(bodyNumber=ground, localPosition=[z.real, z.imag, 0.0]))
+
+    def link(z0, z1, ang, omega, v0):
+        ref = 0.5 * (z0 + z1)
+        vref = v0 + 1j * omega * (ref - z0)
+        n = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[ref.real, ref.imag, ang], initialVelocities=[vref.real, vref.imag, omega]))
+        bd = mbs.AddObject(ObjectRigidBody2D(mass=1.0, inertia=0.1, nodeNumber=n))
+
+        def marker(z):
+            loc = (z - ref) * np.exp(-1j * ang)
+            return mbs.AddMarker(MarkerBodyPosition(bodyNumber=bd, localPosition=[loc.real, loc.imag, 0.0]))
+
+        return n, marker
+
+    vA = 1j * OMEGA * A
+    n2, m2 = link(0j, A, 0.0, OMEGA, 0j)
+    n3, m3 = link(A, B, t3, w3, vA)
+    n4, m4 = link(O4, B, t4, w4, 0j)
+    for x, y in ((gmarker(0j), m2(0j)), (m2(A), m3(A)), (m3(B), m4(B)), (gmarker(O4), m4(O4))):
+        mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[x, y]))
+    ng = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+    mg = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ng, coordinate=0))
+    mc = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=n2, coordinate=2))
+    mbs.AddObject(CoordinateConstraint(markerNumbers=[mg, mc], offsetUserFunction=lambda mbs, t, i, off: OMEGA * t + 0.5 * ALPHA * t * t))
+    sens = [mbs.AddSensor(SensorNode(nodeNumber=n, storeInternal=True, outputVariableType=v))
+            for n in (n2, n3, n4) for v in (exu.OutputVariableType.Rotation, exu.OutputVariableType.AngularVelocity,
+                                               exu.OutputVariableType.Coordinates_tt)]
+    mbs.Assemble()
+    s = exu.SimulationSettings()
+    ti = s.timeIntegration
+    ti.numberOfSteps, ti.endTime = n_steps, T
+    ti.newton.relativeTolerance, ti.newton.absoluteTolerance = 1e-12, 1e-14
+    ti.verboseMode = 0
+    ti.generalizedAlpha.spectralRadius = spectral_radius
+    s.solution.file.write = False
+    s.solution.sensors.writePeriod = 0.999 * T / n_steps
+    s.show.computationTime = False
+    s.show.statistics = False
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mbs.SolveDynamic(s)
+    solve_s = time.perf_counter() - t0
+    data = [mbs.GetSensorStoredData(k) for k in sens]
+    tt = data[0][:, 0]
+    rot = lambda k: np.asarray(data[k])[:, -1]  # noqa: E731  (last column: the z component)
+    th2, w2 = rot(0), rot(1)
+    out = (rot(3), rot(6), rot(4), rot(7), np.asarray(data[5])[:, 3], np.asarray(data[8])[:, 3])
+    return tt, th2, w2, out, solve_s
+
+
 def _mechanism_pkg(us, p):
     """The `mechanism` package (PyPI): vector loops solved by fsolve, per position."""
     import warnings
@@ -269,6 +344,30 @@ def run(quick: bool = False) -> dict:
     except Exception as e:  # pragma: no cover
         notes["mechanism"] = f"failed: {type(e).__name__}: {e}"
         traceback.print_exc()
+
+    # Exudyn (time stepping, as the flap report used MBDyn): its own time grid over one crank
+    # turn; errors against the closed form at its (theta2, omega2) samples.  Exudyn's initial
+    # accelerations ignore the prescribed crank acceleration (0.2 rad/s^2 off at t = 0), and
+    # the generalized-alpha transient from it decays over ~20 steps: acceleration errors are
+    # taken after the first 5 % of the turn (the full-turn figure is kept as acc_err_with_startup).
+    for n_steps in ((360, 1440) if quick else (1440, 5760, 23040)):
+        try:
+            import warnings
+
+            res = {}
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                t = time_python(lambda: res.__setitem__("r", _exudyn_fourbar(n_steps)), repeat=1 if quick else 3, warmup=0)
+            tt, th2, w2, out, solve_s = res["r"]
+            r_ex = closed_form_numpy(th2, **DESIGN, w2=w2, al2=ALPHA)
+            k0 = max(1, len(tt) // 20)
+            errs = _errors(*out[:4], out[4][k0:], out[5][k0:], (*r_ex[:4], r_ex[4][k0:], r_ex[5][k0:]))
+            full = _errors(*out, r_ex)["acc_err"]
+            rows.append(_row(f"exudyn_genalpha_{n_steps}_steps", len(tt), t, 0.0, errs, step_s=float(tt[1] - tt[0]),
+                             solve_only_ns_per_position=solve_s / len(tt) * 1e9, acc_err_with_startup=full))
+        except Exception as e:  # pragma: no cover
+            notes[f"exudyn_{n_steps}"] = f"failed: {type(e).__name__}: {e}"
+            traceback.print_exc()
 
     # ---- designs x positions
     print(f"-- {d_designs} designs x {n_per} positions", flush=True)
