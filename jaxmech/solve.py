@@ -255,15 +255,20 @@ def _all_finite(tree) -> jax.Array:
 
 
 # --------------------------------------------------------------------------- Newton (no gradients)
+def _coord_scales(mech: Mechanism, p, dtype):
+    """``s (m,)``: 1 for angles, the design's length scale for lengths (m)."""
+    L = mech.length_scale(p).astype(dtype)
+    return jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+
+
 def _scaled_residual(mech: Mechanism, u, p, dtype):
     """``q -> (Phi/R, d(Phi/R)/dz)`` with ``z = q / s``, and the coordinate scales ``s``.
 
     ``s`` is 1 for angles and the design's length scale for lengths; ``R`` is the residual
     scale (the length scale for loop closures).  Both make tolerances unit-independent.
     """
-    L = mech.length_scale(p).astype(dtype)
     R = mech.residual_scales(p, dtype)
-    s = jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+    s = _coord_scales(mech, p, dtype)
 
     def evaluate(q):
         def f(q_):
@@ -639,9 +644,33 @@ def _on_branch(mech: Mechanism, b0, q, u, p):
     return _on_branch_value(b0, mech.branch_value(q, u, p))
 
 
-def _predict(q, d1, d2, du):
-    """Second-order Taylor predictor ``q + q' du + q'' du du / 2`` from a solved anchor."""
+def _taylor(q, d1, d2, du):
+    """Second-order Taylor step from a solved anchor: ``q + q' du + q'' du du / 2``."""
     return q + d1 @ du + 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
+
+
+def _trusted_terms(d1, d2, du, s, max_step):
+    """``(d1, d2)`` with the terms the Taylor series cannot be trusted with over ``du`` zeroed.
+
+    Near a singular position the series diverges (there ``q''`` is huge: a flap design
+    that starts near a toggle had its second-order term predict 2000 rad, and Newton then
+    converged to the same pose 319 turns away, where angle-dependent loads are wrong).  So
+    the second-order term is kept only while it is under a quarter of the first-order one
+    (scaled max norms: the series is then converging), and a step of more than ``max_step``
+    (scaled, as Newton's) is not predicted at all: the anchor itself is the guess.
+    """
+    first = d1 @ du
+    second = 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
+    size = lambda x: _small_max(jnp.abs(x) / s)  # noqa: E731
+    keep2 = size(second) <= 0.25 * size(first)
+    step = jnp.where(keep2, first + second, first)
+    keep1 = size(step) <= max_step
+    return jnp.where(keep1, d1, 0.0), jnp.where(keep1 & keep2, d2, 0.0)
+
+
+def _predict(q, d1, d2, du, s, max_step):
+    """The guarded predictor ``_taylor`` with ``_trusted_terms`` over ``du``."""
+    return _taylor(q, *_trusted_terms(d1, d2, du, s, max_step), du)
 
 
 def _anchor_step(n: int, n_anchors: int) -> int:
@@ -674,10 +703,11 @@ def _stroke_anchors(mech: Mechanism, options: SolverOptions, k: int, us, ps, gue
     else:
         b0 = jnp.zeros((d,), guess.dtype)
     on_branch = jax.vmap(lambda b_, q_, u_, p_: _on_branch(mech, b_, q_, u_, p_), (0, 0, None, 0))
+    scales = jax.vmap(lambda p_: _coord_scales(mech, p_, guess.dtype))(ps)
 
     def scan_fn(carry, u_next):
         q, d1, d2, u_prev = carry
-        g = jax.vmap(_predict)(q, d1, d2, u_next - u_prev)
+        g = jax.vmap(lambda *a: _predict(*a, options.max_step))(q, d1, d2, u_next - u_prev, scales)
         g = jnp.where(on_branch(b0, g, u_next, ps)[:, None], g, q)  # a predictor off the branch: fall back to q
         qn, status, *_ = jax.vmap(lambda p_, g_: _newton(mech, options, u_next, p_, g_))(ps, g)
         good = (status == Status.CONVERGED) & on_branch(b0, qn, u_next, ps)
@@ -694,25 +724,32 @@ def _stroke_anchors(mech: Mechanism, options: SolverOptions, k: int, us, ps, gue
     return tuple(jnp.moveaxis(x, 0, 1) for x in anchors), b0
 
 
-def _stroke_guesses(anchors, k: int, us):
+def _stroke_guesses(anchors, k: int, us, s, max_step):
     """Guesses ``(N, m)`` for every point of a stroke from its nearest anchor, and that anchor's
     ``q`` (the fallback start).
 
     Point ``i`` belongs to anchor ``round(i / k)``: the stroke is padded by ``k // 2`` in
     front and cut into blocks of ``k``, block ``j`` centred on anchor ``j``, so the anchor
     data broadcast over a block (no per-point gather).  The guess is the anchor's
-    second-order predictor; its error is about ``|d3q/du3| h^3 / 6`` at distance ``h``,
-    so one Newton step from it reaches machine precision on a smooth stroke.
+    second-order predictor, with the terms its series cannot be trusted with over the
+    block dropped (``_trusted_terms``); its error is about ``|d3q/du3| h^3 / 6``
+    at distance ``h``, so one Newton step from it reaches machine precision on a smooth
+    stroke.  ``s``: the coordinate scales; ``max_step``: the largest predicted step.
     """
     qa, d1a, d2a, uaa = anchors
     n, na = us.shape[0], qa.shape[0]
+    # Trust each anchor's series over its block's half-width (the farthest point it guesses).
+    half = jnp.concatenate([jnp.abs(uaa[1:] - uaa[:-1]), jnp.abs(uaa[-1:] - uaa[-2:-1])], axis=0) if na > 1 else jnp.zeros_like(uaa)
+    d1a, d2a = jax.vmap(lambda a_, b_, h_: _trusted_terms(a_, b_, h_, s, max_step))(d1a, d2a, half)
     shift = k // 2
     blocks = -(-(n + shift) // k)
     pad = blocks * k - n - shift
     u_blk = jnp.concatenate([jnp.broadcast_to(us[:1], (shift,) + us.shape[1:]), us, jnp.broadcast_to(us[-1:], (pad,) + us.shape[1:])])
     u_blk = u_blk.reshape((blocks, k) + us.shape[1:])
     j = np.minimum(np.arange(blocks), na - 1)
-    g = jax.vmap(lambda q_, a_, b_, ua_, u_: jax.vmap(lambda uu: _predict(q_, a_, b_, uu - ua_))(u_))(qa[j], d1a[j], d2a[j], uaa[j], u_blk)
+    g = jax.vmap(lambda q_, a_, b_, ua_, u_: jax.vmap(lambda uu: _taylor(q_, a_, b_, uu - ua_))(u_))(
+        qa[j], d1a[j], d2a[j], uaa[j], u_blk
+    )
     g = g.reshape((blocks * k,) + g.shape[2:])[shift : shift + n]
     q0 = jnp.broadcast_to(qa[j][:, None], (blocks, k) + qa.shape[1:]).reshape((blocks * k,) + qa.shape[1:])[shift : shift + n]
     return g, q0
@@ -747,7 +784,8 @@ def _stroke_batch(mech, options, n_anchors, derivs, single, us, p, guess):
     k = _anchor_step(n, n_anchors)
     anchors, b0 = _stroke_anchors(mech, options, k, us_s, ps, stop(guess))
     inputs_ok = p_fin[:, None] & us_fin[None, :] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
-    guesses, starts = jax.vmap(lambda a_: _stroke_guesses(a_, k, us_s))(anchors)
+    scales = jax.vmap(lambda p_: _coord_scales(mech, p_, guess.dtype))(ps)
+    guesses, starts = jax.vmap(lambda a_, s_: _stroke_guesses(a_, k, us_s, s_, options.max_step))(anchors, scales)
 
     def per_point(fn, *args):
         """``fn(u, p, b0, *per-point args)`` over designs (outer) and stroke points (inner)."""
