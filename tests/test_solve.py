@@ -361,3 +361,21 @@ def test_stroke_kinematics_accuracy_and_parameter_gradient():
     _, g = jax.jvp(figure, (2.5,), (1.0,))  # forward mode; reverse mode: test_check_grads_...
     fd = central_diff(lambda c: float(figure(c)), 2.5, h=1e-3)
     np.testing.assert_allclose(float(g), fd, rtol=1e-7)
+
+
+def test_predictor_drops_terms_its_series_cannot_be_trusted_with():
+    """Near a singular position q'' is huge: the second-order term must then be dropped, and
+    a predicted step above max_step dropped altogether (a flap design starting near a toggle
+    was predicted 2000 rad away and converged 319 turns off before this guard)."""
+    from jaxmech.solve import _predict
+
+    q, s = jnp.array([0.3, 1.0]), jnp.array([1.0, 1.0])
+    d1 = jnp.array([[1.0], [-0.5]])
+    smooth = jnp.array([[[0.4]], [[0.2]]])
+    du = jnp.array([0.01])
+    exact2 = q + d1 @ du + 0.5 * smooth[:, :, 0] @ du**2
+    np.testing.assert_allclose(np.asarray(_predict(q, d1, smooth, du, s, 1.0)), np.asarray(exact2), rtol=1e-15)
+    wild = 1e8 * smooth  # second-order term 100x the first: first order only
+    np.testing.assert_allclose(np.asarray(_predict(q, d1, wild, du, s, 1.0)), np.asarray(q + d1 @ du), rtol=1e-15)
+    fast = 1e3 * d1  # a 10 rad first-order step: no prediction at all
+    np.testing.assert_array_equal(np.asarray(_predict(q, fast, smooth, du, s, 1.0)), np.asarray(q))
