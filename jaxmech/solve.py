@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .mechanism import Mechanism
+from .mechanism import Mechanism, _unfused
 from .status import Status
 
 __all__ = ["SolverOptions", "Solution", "solve", "solve_stroke", "solve_one", "implicit_root"]
@@ -213,23 +213,18 @@ def _inv_small(a):
 
 
 def _materialize(*xs):
-    """The arrays ``xs`` (one sample's values), each computed once under jit on CPU.
+    """The arrays ``xs`` (one sample's few values), each computed once under jit on CPU.
 
-    XLA's CPU fusion copies elementwise producers into every consumer fusion, so a value
-    used by several outputs (the fast path's ``ok`` feeds all of them) is recomputed, with
-    its whole cone, in each.  An identity product is not fused: packing the values through
-    one makes them a single materialised array.  Exact (``1 x + 0 y``) for finite values; a
-    non-finite entry can only turn others of the same pack non-finite, so pack values that
-    fail together.
+    A value used by several outputs (the fast path's ``ok`` feeds all of them) is otherwise
+    recomputed, with its whole cone, in each output's fusion; the values are packed into
+    one vector and passed through ``_unfused`` (see there for exactness).
     """
     flat = [jnp.ravel(jnp.asarray(x, dtype=jnp.result_type(*xs))) for x in xs]
-    sizes = [f.shape[0] for f in flat]
-    v = jnp.concatenate(flat)
-    v = jnp.tensordot(jnp.eye(v.shape[0], dtype=v.dtype), v, axes=1, precision=jax.lax.Precision.HIGHEST)
+    v = _unfused(jnp.concatenate(flat))
     out, start = [], 0
-    for x, size in zip(xs, sizes):
-        out.append(v[start : start + size].reshape(jnp.shape(x)).astype(jnp.asarray(x).dtype))
-        start += size
+    for x, f in zip(xs, flat):
+        out.append(v[start : start + f.shape[0]].reshape(jnp.shape(x)).astype(jnp.asarray(x).dtype))
+        start += f.shape[0]
     return out
 
 
@@ -738,9 +733,10 @@ def _stroke_guesses(anchors, k: int, us, s, max_step):
     """
     qa, d1a, d2a, uaa = anchors
     n, na = us.shape[0], qa.shape[0]
-    # Trust each anchor's series over its block's half-width (the farthest point it guesses).
-    half = jnp.concatenate([jnp.abs(uaa[1:] - uaa[:-1]), jnp.abs(uaa[-1:] - uaa[-2:-1])], axis=0) if na > 1 else jnp.zeros_like(uaa)
-    d1a, d2a = jax.vmap(lambda a_, b_, h_: _trusted_terms(a_, b_, h_, s, max_step))(d1a, d2a, half)
+    # Trust each anchor's series over the spacing to the next anchor: twice the farthest
+    # point it guesses, a margin against uneven strokes.
+    spacing = jnp.concatenate([jnp.abs(uaa[1:] - uaa[:-1]), jnp.abs(uaa[-1:] - uaa[-2:-1])], axis=0) if na > 1 else jnp.zeros_like(uaa)
+    d1a, d2a = jax.vmap(lambda a_, b_, h_: _trusted_terms(a_, b_, h_, s, max_step))(d1a, d2a, spacing)
     shift = k // 2
     blocks = -(-(n + shift) // k)
     pad = blocks * k - n - shift
