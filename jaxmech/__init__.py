@@ -31,6 +31,7 @@ from .dynamics import inverse_dynamics_at as inverse_dynamics_at
 from .dynamics import kinetic_energy as kinetic_energy
 from .dynamics import mass_matrix as mass_matrix
 from .dynamics import potential_energy as potential_energy
+from .continuation import solve_stroke as solve_stroke
 from .kinematics import ConstantSpeed as ConstantSpeed
 from .kinematics import Motion as Motion
 from .kinematics import Ramp as Ramp
@@ -47,7 +48,6 @@ from .solve import SolverOptions as SolverOptions
 from .solve import implicit_root as implicit_root
 from .solve import solve as solve
 from .solve import solve_one as solve_one
-from .solve import solve_stroke as solve_stroke
 from .status import Status as Status
 from .status import status_counts as status_counts
 from .status import status_message as status_message

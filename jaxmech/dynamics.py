@@ -50,7 +50,9 @@ import numpy as np
 from .actuators import DCMotor, Spec, resolve
 from .kinematics import time_derivatives
 from .mechanism import Mechanism, Vars
-from .solve import SolverOptions, _as_coords, _as_inputs, _cond1, _solve_small, _tolerances, implicit_root, solve, solve_one, solve_stroke
+from ._linalg import cond1, solve_small
+from .continuation import solve_stroke
+from .solve import SolverOptions, as_coords, as_inputs, implicit_root, solve, solve_one, tolerances
 from .status import Status
 
 __all__ = [
@@ -406,7 +408,7 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     g = jax.grad(work)(jnp.concatenate([q, u]))
     jq, ju = jax.jacfwd(mech.residual, (0, 1))(q, u, p)
     jq = jnp.where(ok, jq, jnp.eye(mech.m, dtype=dtype))
-    lam = -_solve_small(jq.T, g[: mech.m])
+    lam = -solve_small(jq.T, g[: mech.m])
     tau = g[mech.m :] + ju.T @ lam
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
     return nan(tau), nan(lam)
@@ -516,10 +518,10 @@ def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=
     **Returns** an ``InverseDynamics`` with the broadcast batch shape in front.
     """
     mech = model.mechanism
-    u = _as_inputs(mech, u)
-    ud = _as_inputs(mech, u_dot, "u_dot")
-    udd = _as_inputs(mech, u_ddot, "u_ddot")
-    guess = _as_coords(mech, guess)
+    u = as_inputs(mech, u)
+    ud = as_inputs(mech, u_dot, "u_dot")
+    udd = as_inputs(mech, u_ddot, "u_ddot")
+    guess = as_coords(mech, guess)
     dtype = jnp.result_type(u, ud, udd, guess, float)
     p = _prep_p(model, p, dtype)
     t = jnp.asarray(t, dtype)
@@ -553,7 +555,7 @@ def _id_drive_static(model, quasi_static, drive, p, t, q):
 
 
 def inverse_dynamics(model: Model, drive, t, p: Mapping, guess, *, quasi_static: bool = False,
-                     options: SolverOptions = SolverOptions(), anchors: int = 256) -> InverseDynamics:
+                     options: SolverOptions = SolverOptions(), anchors: int | None = None) -> InverseDynamics:
     """Driving force/torque and reactions along a drive law ``u(t)`` (one design).
 
     **Arguments**
@@ -644,7 +646,7 @@ def _attach_equilibrium_jvp(model, applied, primals, tangents):
     _, rhs = jax.jvp(lambda p_, t_: res(u_s, p_, t_), (p_s, t), (dp, dt))
     ju = jax.jacfwd(res)(u_s, p_s, t)
     ju = jnp.where(ok, ju, jnp.eye(u.shape[0], dtype=ju.dtype))
-    du = -_solve_small(ju, rhs)
+    du = -solve_small(ju, rhs)
     return u, jnp.where(ok, du, jnp.zeros_like(du))
 
 
@@ -677,7 +679,7 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
     def body(st):
         k, u, q, r, j, a, b, step, ok, done, r_lo, has_root = st
         first = k == 0
-        newton = u - _solve_small(j, r)
+        newton = u - solve_small(j, r)
         if bracket:
             # Safeguarded Newton (rtsafe): keep a sign-change bracket, bisect when Newton leaves it.
             inside = jnp.all(jnp.isfinite(newton)) & (newton[0] > a[0]) & (newton[0] < b[0])
@@ -709,7 +711,7 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
     k, u, q, r, j, a, b, step, ok, done, r_lo, has_root = jax.lax.while_loop(cond_fn, body, init)
     k = k - 1  # iteration 0 only evaluated the start and the ends
     # The last Newton step is cheap and takes the error from ~step^2 to round-off.
-    last = u - _solve_small(j, r)
+    last = u - solve_small(j, r)
     scale = 1.0 + jnp.max(jnp.abs(u))
     conv = ok & jnp.all(jnp.isfinite(r)) & ((step <= xtol * scale) | jnp.all(r == 0))
     if bracket:
@@ -763,11 +765,11 @@ def equilibrium(model: Model, p: Mapping, bounds, guess, *, u0=None, applied: Sp
     differentiable in ``p`` (implicit function theorem, forward and reverse mode).
     """
     mech = model.mechanism
-    lo, hi = (_as_inputs(mech, jnp.asarray(b), "bounds") for b in bounds)
-    guess = _as_coords(mech, guess)
+    lo, hi = (as_inputs(mech, jnp.asarray(b), "bounds") for b in bounds)
+    guess = as_coords(mech, guess)
     dtype = jnp.result_type(lo, hi, guess, float)
     pj = _prep_p(model, p, dtype)
-    u0 = 0.5 * (lo + hi) if u0 is None else _as_inputs(mech, jnp.asarray(u0), "u0")
+    u0 = 0.5 * (lo + hi) if u0 is None else as_inputs(mech, jnp.asarray(u0), "u0")
     t = jnp.asarray(t, dtype)
     shape = np.broadcast_shapes(lo.shape[:-1], hi.shape[:-1], u0.shape[:-1], guess.shape[:-1], t.shape,
                                 *[v.shape for v in pj.values()])
@@ -845,16 +847,16 @@ def _close(mech: Mechanism, u, p, qg, iters: int):
     above tolerance, a singular Jacobian (toggle) or a change of assembly branch."""
     stop = jax.lax.stop_gradient
     us, ps = stop(u), jax.tree_util.tree_map(stop, p)
-    _, ftol, cond_max = _tolerances(SolverOptions(), qg.dtype)
+    _, ftol, cond_max = tolerances(SolverOptions(), qg.dtype)
     def newton_step(_, q):
-        return q - _solve_small(jax.jacfwd(mech.residual)(q, us, ps), mech.residual(q, us, ps))
+        return q - solve_small(jax.jacfwd(mech.residual)(q, us, ps), mech.residual(q, us, ps))
 
     q = jax.lax.fori_loop(0, iters, newton_step, stop(qg))
     r = mech.residual(q, us, ps)
     scale = mech.length_scale(ps)
     ok = jnp.all(jnp.isfinite(q)) & (jnp.linalg.norm(r) <= ftol * scale)
     s_ = jnp.where(jnp.asarray(mech.coord_is_length()), scale, 1.0)
-    ok = ok & (_cond1(jax.jacfwd(mech.residual)(q, us, ps) * s_[None, :] / scale) <= cond_max)
+    ok = ok & (cond1(jax.jacfwd(mech.residual)(q, us, ps) * s_[None, :] / scale) <= cond_max)
     if mech.branch is not None:
         ok = ok & (jnp.sign(mech.branch_value(q, us, ps)) == jnp.sign(mech.branch_value(stop(qg), us, ps)))
     q_star = jnp.where(ok, q, jnp.nan)
@@ -884,7 +886,7 @@ def _rhs(model: Model, load, motor, voltage, k_in, iters, p, t, y, qg):
             i = y[2 * dof]
             tau = tau.at[k_in].add(motor.torque(i, p))
             di = [motor.current_rate(i, v, ud[k_in], p)]
-    udd = _solve_small(M, tau - hvec)
+    udd = solve_small(M, tau - hvec)
     f = jnp.concatenate([ud, udd, jnp.reshape(jnp.asarray(di, y.dtype), (-1,))])
     return jnp.where(ok, f, jnp.nan)
 
@@ -1044,9 +1046,9 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
         if motor_input not in mech.inputs:
             raise ValueError(f"motor_input {motor_input!r} is not an input; inputs are {list(mech.inputs)}")
         k_in = mech.inputs.index(motor_input)
-    u0 = _as_inputs(mech, jnp.asarray(u0), "u0")
-    ud0 = _as_inputs(mech, jnp.asarray(u_dot0), "u_dot0")
-    guess = _as_coords(mech, guess)
+    u0 = as_inputs(mech, jnp.asarray(u0), "u0")
+    ud0 = as_inputs(mech, jnp.asarray(u_dot0), "u_dot0")
+    guess = as_coords(mech, guess)
     dtype = jnp.result_type(u0, ud0, guess, float)
     pj = _prep_p(model, p, dtype)
     parts = [u0.astype(dtype), ud0.astype(dtype)]

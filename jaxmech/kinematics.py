@@ -19,7 +19,8 @@ import jax
 import jax.numpy as jnp
 
 from .mechanism import Mechanism
-from .solve import Solution, SolverOptions, _derivatives_at, _stroke, implicit_root, solve_stroke
+from .continuation import solve_stroke, stroke
+from .solve import Solution, SolverOptions, implicit_root, root_derivatives
 
 __all__ = [
     "ConstantSpeed",
@@ -100,7 +101,7 @@ def input_derivatives(mech: Mechanism, q, u, p):
     with NaN positions give zeros (mask them by status).
     """
     ok = jnp.all(jnp.isfinite(q))
-    return _derivatives_at(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
+    return root_derivatives(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
 
 
 def time_derivatives(fn: Callable, t):
@@ -202,7 +203,7 @@ def motion(
     *,
     points: Sequence[str] | None = None,
     options: SolverOptions = SolverOptions(),
-    anchors: int = 256,
+    anchors: int | None = None,
 ) -> Motion:
     """Positions, velocities and accelerations along a drive law ``u(t)`` (one design).
 
@@ -233,7 +234,7 @@ def motion(
     )
 
 
-def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
+def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int | None = None):
     """Positions and per-unit-input derivatives over a stroke ``us``, for one design or a
     batch of designs (``p`` leaves of shape ``(D,)``), in one compiled pass.
 
@@ -241,4 +242,4 @@ def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: Solver
     where the status is not ``CONVERGED``.  The derivatives are those of ``input_derivatives``
     (differentiable again in ``u`` and ``p``), computed together with the solve.
     """
-    return _stroke(mech, us, p, guess, options, anchors, derivs=True)
+    return stroke(mech, us, p, guess, options, derivs=True, anchors=anchors)

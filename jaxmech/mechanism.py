@@ -37,19 +37,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._xla import unfused
+
 __all__ = ["Mechanism", "cis", "Vars"]
-
-
-def _unfused(v):
-    """``v`` unchanged, computed once under jit on CPU: ``I @ v`` over its first axis.
-
-    XLA's CPU fusion copies an elementwise producer into every consumer fusion; a product
-    is not fused, so its operand becomes one materialised array.  Exact (``1 x + 0 y``) for
-    finite values; a non-finite entry can turn the others along the first axis non-finite,
-    so pack values that fail together.  Cost: one pass over ``v`` (the first axis is small).
-    """
-    eye = jnp.eye(v.shape[0], dtype=v.dtype)
-    return jnp.tensordot(eye, v, axes=1, precision=jax.lax.Precision.HIGHEST)
 
 
 @jax.custom_jvp
@@ -66,7 +56,7 @@ def _cos_sin(angle):
     160 ns per position (benchmarks/kinematics.py).
     """
     angle = jnp.asarray(angle)
-    pair = _unfused(jnp.stack([jnp.cos(angle), jnp.sin(angle)]))
+    pair = unfused(jnp.stack([jnp.cos(angle), jnp.sin(angle)]))
     return pair[0], pair[1]
 
 

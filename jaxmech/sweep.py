@@ -29,7 +29,8 @@ import numpy as np
 
 from .kinematics import ConstantSpeed, Motion, time_derivatives
 from .scenes.base import Scene
-from .solve import SolverOptions, implicit_root, solve_stroke
+from .continuation import solve_stroke
+from .solve import SolverOptions, implicit_root
 from .status import Status, status_counts
 
 __all__ = ["SweepResult", "grid", "random_designs", "sweep_scene"]

@@ -296,11 +296,11 @@ def test_two_loop_sixbar_stroke_closes_and_derivatives():
     np.testing.assert_allclose(np.asarray(d1[i, :, 0]), fd, rtol=1e-9, atol=1e-11)
 
 
-# ----------------------------------------------------------------------------- fast path internals
+# ----------------------------------------------------------------------------- continuation and linear algebra
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 6, 9])
 def test_small_solves_and_condition_numbers_match_numpy(n):
     """The unrolled (n <= 4) and looped (n > 4) eliminations against LAPACK via numpy."""
-    from jaxmech.solve import _cond1, _solve_small
+    from jaxmech._linalg import cond1 as _cond1, solve_small as _solve_small
 
     rng = _rng(n)
     a = rng.normal(size=(n, n)) + 0.5 * n * np.eye(n)
@@ -322,33 +322,36 @@ def _toggle_stroke():
     return th, p, jnp.array([t3, t4])
 
 
-def test_fast_path_and_robust_fallback_agree():
-    """Points accepted by the fast path (one Newton step from the anchor predictor,
-    derivatives at that iterate) against the robust loop for every point (``lean_steps=0``
-    never passes the fast test from a predictor), on a clean stroke and on one with
-    infeasible points: same statuses, positions to 1e-13, derivatives to 1e-9."""
-    robust = jm.SolverOptions(lean_steps=0)
-    # both strokes have 2001 points: one compiled function per option set serves both
+def test_stroke_agrees_with_independent_pointwise_solves():
+    """Every stroke point (solved from its anchor's predictor, one block at a time) against a
+    pointwise solve of the same input from a guess 0.1 rad off the closed form (the last
+    assemblable pose beyond the toggle), on a clean stroke and on one that runs into the
+    unassemblable range: same statuses, positions to 1e-13, derivatives to 1e-9."""
     for th, p, g in [(np.linspace(0.0, 2 * np.pi, 2001), {"a": 1.0, "b": 3.0, "c": 2.5, "d": 3.5}, jnp.array([0.2, 1.2])), _toggle_stroke()]:
-        fast = jm.stroke_kinematics(FB, th, p, g)
-        slow = jm.stroke_kinematics(FB, th, p, g, options=robust)
-        assert np.any(np.asarray(slow[0].steps) > 0)  # the robust loop did the work
-        np.testing.assert_array_equal(np.asarray(fast[0].status), np.asarray(slow[0].status))
-        for x, y, tol in [(fast[0].q, slow[0].q, 1e-13), (fast[1], slow[1], DERIV_RTOL), (fast[2], slow[2], DERIV_RTOL)]:
-            np.testing.assert_array_equal(np.isnan(np.asarray(x)), np.isnan(np.asarray(y)))
-            np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=tol, atol=tol)
-    st = np.asarray(fast[0].status)
+        sol, d1, d2 = jm.stroke_kinematics(FB, th, p, g)
+        t3, t4 = fourbar_closed(th, **p)
+        last = np.flatnonzero(np.isfinite(t3))[-1]
+        guess = np.stack([np.where(np.isfinite(t3), t3, t3[last]), np.where(np.isfinite(t4), t4, t4[last])], -1) + 0.1
+        pw = jm.solve(FB, th, p, guess)
+        e1, e2 = jax.vmap(lambda q, u: jm.input_derivatives(FB, q, u, p))(pw.q, jnp.asarray(th)[:, None])
+        np.testing.assert_array_equal(np.asarray(sol.status), np.asarray(pw.status))
+        ok = np.asarray(pw.ok)
+        np.testing.assert_array_equal(np.isnan(np.asarray(sol.q)), np.isnan(np.asarray(pw.q)))
+        assert np.all(np.isnan(np.asarray(d1)[~ok])) and np.all(np.isnan(np.asarray(d2)[~ok]))
+        for x, y, tol in [(sol.q, pw.q, 1e-13), (d1, e1, DERIV_RTOL), (d2, e2, DERIV_RTOL)]:
+            np.testing.assert_allclose(np.asarray(x)[ok], np.asarray(y)[ok], rtol=tol, atol=tol)
+    st = np.asarray(sol.status)
     assert (st == jm.Status.CONVERGED).any() and (st == jm.Status.INFEASIBLE).any()
 
 
 def test_stroke_kinematics_accuracy_and_parameter_gradient():
-    """Fast-path velocities and accelerations against the closed form, and the gradient of
-    a figure built from them (through the implicit function theorem at the fast path's
-    iterate) against sixth-order central differences."""
+    """Stroke velocities and accelerations against the closed form, and the gradient of a
+    figure built from them (through the implicit function theorem at the stroke's roots)
+    against sixth-order central differences."""
     p = {"a": 1.0, "b": 3.0, "c": 2.5, "d": 3.5}
     th = np.linspace(0.0, 2 * np.pi, 2001)
     sol, d1, d2 = jm.stroke_kinematics(FB, th, p, jnp.array([0.2, 1.2]))
-    assert np.all(np.asarray(sol.steps) == jm.SolverOptions().lean_steps)  # the fast path took every point
+    assert np.all(np.asarray(sol.steps)[1:] == 1)  # one Newton step per point from its anchor's predictor (point 0: from the user's guess)
     grad_closed = jax.vmap(jax.grad(lambda t: fourbar_closed(t, **p)[1]))
     hess_closed = jax.vmap(jax.grad(jax.grad(lambda t: fourbar_closed(t, **p)[1])))
     np.testing.assert_allclose(np.asarray(d1[:, 1, 0]), np.asarray(grad_closed(jnp.asarray(th))), rtol=DERIV_RTOL, atol=DERIV_RTOL)
@@ -367,7 +370,7 @@ def test_predictor_drops_terms_its_series_cannot_be_trusted_with():
     """Near a singular position q'' is huge: the second-order term must then be dropped, and
     a predicted step above max_step dropped altogether (a flap design starting near a toggle
     was predicted 2000 rad away and converged 319 turns off before this guard)."""
-    from jaxmech.solve import _predict
+    from jaxmech.continuation import predict as _predict
 
     q, s = jnp.array([0.3, 1.0]), jnp.array([1.0, 1.0])
     d1 = jnp.array([[1.0], [-0.5]])

@@ -1,0 +1,133 @@
+"""Small dense linear algebra for per-sample systems (m = 1..~10) under ``vmap``.
+
+XLA's CPU batched LAPACK path is ~12x slower per sample than straight-line code and was
+seen to hang the jaxlib 0.10 CPU runtime in large batched loops, so the solves here are
+written as elementwise programs: Cramer's rule for 1x1 and 2x2, unrolled elimination with
+pivoting as selects up to ``UNROLL_MAX``, a ``fori_loop`` elimination beyond.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["UNROLL_MAX", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1"]
+
+# Per-sample systems are tiny (m = 1..8) and run under vmap over up to 1e6 samples.  XLA's
+# CPU batched LAPACK path is ~12x slower per sample than straight-line code, and reductions
+# over a size-m axis end an XLA fusion (everything feeding them is recomputed in the next
+# one), so small sizes are unrolled into elementwise operations.  Up to 4x4: unrolling a
+# 6x6 elimination (flap_msd) added ~8 s of compile per function for no measurable gain.
+UNROLL_MAX = 4
+
+
+def small_max(x):
+    """Max over the last axis, unrolled for small sizes."""
+    if x.shape[-1] > UNROLL_MAX:
+        return jnp.max(x, axis=-1)
+    return functools.reduce(jnp.maximum, [x[..., i] for i in range(x.shape[-1])])
+
+
+def small_sum(x):
+    """Sum over the last axis, unrolled for small sizes."""
+    if x.shape[-1] > UNROLL_MAX:
+        return jnp.sum(x, axis=-1)
+    return functools.reduce(jnp.add, [x[..., i] for i in range(x.shape[-1])])
+
+
+def small_norm(x):
+    """Euclidean norm of a vector, unrolled for small sizes."""
+    return jnp.sqrt(small_sum(x * x))
+
+
+def _gauss_unrolled(a, b):
+    """Gaussian elimination with partial pivoting, written out for ``3 <= n <= UNROLL_MAX``.
+
+    `b` is ``(n,)`` or ``(n, k)``.  Row swaps are selects, so the whole solve is one
+    straight-line elementwise program under vmap.  ``a`` and ``b`` are eliminated side by
+    side (not as one augmented matrix) so the solve stays linear in ``b`` for reverse mode.
+    """
+    n = a.shape[-1]
+    vec = b.ndim == 1
+    ra = [a[i] for i in range(n)]
+    rb = [b[i].reshape(-1) for i in range(n)]
+    for k in range(n):
+        # pivot: bring the largest |a[i, k]|, i >= k, to row k
+        for i in range(k + 1, n):
+            swap = jnp.abs(ra[i][k]) > jnp.abs(ra[k][k])
+            ra[k], ra[i] = jnp.where(swap, ra[i], ra[k]), jnp.where(swap, ra[k], ra[i])
+            rb[k], rb[i] = jnp.where(swap, rb[i], rb[k]), jnp.where(swap, rb[k], rb[i])
+        for i in range(k + 1, n):
+            f = ra[i][k] / ra[k][k]
+            ra[i] = ra[i] - f * ra[k]
+            rb[i] = rb[i] - f * rb[k]
+    x = [None] * n
+    for i in reversed(range(n)):
+        acc = rb[i]
+        for j in range(i + 1, n):
+            acc = acc - ra[i][j] * x[j]
+        x[i] = acc / ra[i][i]
+    out = jnp.stack(x)
+    return out[:, 0] if vec else out
+
+
+def _gauss_loop(a, b):
+    """Gaussian elimination with partial pivoting as a ``fori_loop`` over columns, for
+    ``n > UNROLL_MAX``: compact to compile, elementwise under vmap (no batched LAPACK
+    call; those were seen to hang the jaxlib 0.10 CPU runtime in large batched loops).
+    ``a`` and ``b`` are eliminated side by side so the solve stays linear in ``b``.
+    """
+    n = a.shape[-1]
+    vec = b.ndim == 1
+    rhs = b.reshape(n, -1)
+    rows = jnp.arange(n)
+
+    def eliminate(k, state):
+        m, r = state
+        col = jnp.where(rows >= k, jnp.abs(m[:, k]), -1.0)
+        piv = jnp.argmax(col)
+        perm = rows.at[k].set(piv).at[piv].set(k)
+        m, r = m[perm], r[perm]
+        f = jnp.where(rows > k, m[:, k] / m[k, k], 0.0)
+        return m - f[:, None] * m[k][None, :], r - f[:, None] * r[k][None, :]
+
+    m, r = jax.lax.fori_loop(0, n, eliminate, (a, rhs))
+
+    def substitute(j, x):
+        i = n - 1 - j
+        xi = (r[i] - m[i] @ x) / m[i, i]  # x[i:] rows not yet set are zero
+        return x.at[i].set(xi)
+
+    x = jax.lax.fori_loop(0, n, substitute, jnp.zeros_like(r))
+    return x[:, 0] if vec else x
+
+
+def solve_small(a, b):
+    """Solve ``a x = b`` for one small dense system (``b`` of shape ``(n,)`` or ``(n, k)``).
+
+    Cramer's rule for 1x1 and 2x2, unrolled elimination up to ``UNROLL_MAX``, a loop beyond.
+    """
+    n = a.shape[-1]
+    if n == 1:
+        return b / a[0, 0]
+    if n == 2:
+        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+        x0 = (a[1, 1] * b[0] - a[0, 1] * b[1]) / det
+        x1 = (a[0, 0] * b[1] - a[1, 0] * b[0]) / det
+        return jnp.stack([x0, x1])
+    if n <= UNROLL_MAX:
+        return _gauss_unrolled(a, b)
+    return _gauss_loop(a, b)
+
+
+def inv_small(a):
+    return solve_small(a, jnp.eye(a.shape[-1], dtype=a.dtype))
+
+
+def cond1(a):
+    """1-norm condition number of a small square matrix (inf where singular)."""
+    norm1 = lambda m: small_max(small_sum(jnp.abs(m).T))  # noqa: E731  (max column sum)
+    c = norm1(a) * norm1(inv_small(a))
+    return jnp.where(jnp.isfinite(c), c, jnp.inf)

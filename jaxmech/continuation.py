@@ -1,0 +1,303 @@
+"""Strokes by continuation: anchors, a guarded predictor, gaps, and stroke kinematics.
+
+A stroke ``us (N, dof)`` is cut into blocks of ``k`` consecutive points.  A ``lax.scan``
+walks the blocks in order; the last point of each solved block is the *anchor* of the
+next: its root ``q`` and the implicit derivatives ``dq/du``, ``d2q/du2`` there give every
+point of the next block a second-order predicted guess, and the one Newton kernel
+(``solve.newton``) solves the whole block at once (vectorised over its points and over
+the designs).  So one compiled kernel serves anchors and points alike, and a block whose
+guesses are good (a smooth stroke) takes one Newton step per point.
+
+Gaps (stretches where the mechanism cannot be assembled): an anchor that failed is never
+used.  The last trusted anchor is kept, and once a block ends in failure its derivatives
+are dropped, so the points after a gap restart from the last trusted pose itself (damped
+Newton, branch guard) instead of a Taylor series extrapolated across the gap.
+
+Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
+a few sizes per octave, so 361 and 362 points share one compiled program.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._linalg import cond1, small_max, small_norm, solve_small
+from ._xla import unfused
+from .mechanism import Mechanism
+from .solve import (
+    Solution,
+    SolverOptions,
+    batch_shape,
+    coord_scales,
+    evaluator,
+    attach_derivatives,
+    implicit_root,
+    newton,
+    prepare,
+    raise_if_failed,
+    root_derivatives,
+    tolerances,
+)
+from .status import Status
+
+__all__ = ["solve_stroke", "stroke", "predict", "bucket"]
+
+
+# --------------------------------------------------------------------------- predictor
+def on_branch_value(b0, branch):
+    """Whether a branch indicator value has the stroke's sign ``b0`` (0 or NaN: any)."""
+    return (b0 == 0) | ~jnp.isfinite(b0) | (jnp.sign(branch) == b0)
+
+
+def _trusted_terms(d1, d2, du, s, max_step):
+    """``(d1, d2)`` with the terms the Taylor series cannot be trusted with over ``du`` zeroed.
+
+    Near a singular position the series diverges (there ``q''`` is huge: a flap design
+    that starts near a toggle had its second-order term predict 2000 rad, and Newton then
+    converged to the same pose 319 turns away, where angle-dependent loads are wrong).  So
+    the second-order term is kept only while it is under a quarter of the first-order one
+    (scaled max norms: the series is then converging), and a step of more than ``max_step``
+    (scaled, as Newton's) is not predicted at all: the anchor itself is the guess.
+    """
+    first = d1 @ du
+    second = 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
+    size = lambda x: small_max(jnp.abs(x) / s)  # noqa: E731
+    keep2 = size(second) <= 0.25 * size(first)
+    step = jnp.where(keep2, first + second, first)
+    keep1 = size(step) <= max_step
+    return jnp.where(keep1, d1, 0.0), jnp.where(keep1 & keep2, d2, 0.0)
+
+
+def predict(q, d1, d2, du, s, max_step):
+    """Guarded second-order predictor ``q + q' du + q'' du du / 2`` from a solved anchor
+    (``q (m,)``, ``d1 (m, dof)``, ``d2 (m, dof, dof)``) over ``du (dof,)``, with the terms
+    its series cannot be trusted with dropped.  ``s``: coordinate scales (``solve.coord_scales``)."""
+    d1, d2 = _trusted_terms(d1, d2, du, s, max_step)
+    return q + d1 @ du + 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
+
+
+# --------------------------------------------------------------------------- one checked step
+def _lean_xtol(opts: SolverOptions, dtype):
+    """Step test of ``checked_step``.  Derivatives are taken at its iterate, one Newton step
+    ``dz`` from the reported root, and they move by ``|dz|`` times the curvature;
+    ``dz <= 1e4 eps`` keeps that below 1e-9 relative up to a condition number of ~1e3
+    (beyond which the robust kernel re-solves the point anyway)."""
+    return min(tolerances(opts, dtype)[0], 1e4 * float(jnp.finfo(dtype).eps))
+
+
+def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
+    """One plain Newton step from a close (predicted) guess, then the convergence,
+    conditioning, finiteness and branch tests of ``solve.newton``: straight-line code for
+    the common case of a stroke point; the points that fail it go to ``solve.newton``.
+
+    Returns ``(q1, q, ok, residual, cond, branch)``: ``q1`` is the iterate the tests (and the
+    derivatives) are evaluated at, always finite; ``q = q1 - dz`` adds the next step.
+    """
+    dtype = guess.dtype
+    _, ftol, cond_max = tolerances(opts, dtype)
+    evaluate, s = evaluator(mech, u, p, dtype)
+    r, js = evaluate(guess)
+    q = guess - solve_small(js, r) * s
+    finite_q = jnp.all(jnp.isfinite(q))
+    q = jnp.where(finite_q, q, jnp.zeros_like(q))
+    r, js = evaluate(q)
+    dz = solve_small(js, r)
+    rn = small_norm(r)
+    cond = cond1(js)
+    br = mech.branch_value(q, u, p)
+    ok = (small_max(jnp.abs(dz)) <= _lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
+    ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch_value(b0, br)
+    qf = jnp.where(ok, q - dz * s, q)
+    # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
+    packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
+    return q, packed[:-1], packed[-1] > 0.5, rn, cond, br
+
+
+# --------------------------------------------------------------------------- shapes
+def bucket(n: int) -> int:
+    """The compiled size for ``n`` stroke points: ``n`` rounded up to a multiple of a power
+    of two with five significant bits (at most 1/16 = 6% padding)."""
+    e = max(0, int(n).bit_length() - 5)
+    return -(-int(n) // (1 << e)) << e
+
+
+def _block_size(n: int, anchors: int) -> int:
+    """Stroke points per block for ``n`` points and (at most about) ``anchors`` anchors."""
+    return max(1, -(-(n - 1) // max(1, anchors)))
+
+
+# --------------------------------------------------------------------------- the stroke program
+@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3, 4))
+def _stroke_program(mech, options, n_out, derivs, single, us, p, guess):
+    """Strokes of D designs: ``us (N, dof)`` (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
+
+    Returns ``(q, status, steps, residual, cond, branch, d1, d2)`` with ``(D, n_out)`` in
+    front (the design axis dropped with ``single``); ``d1``, ``d2`` are None without
+    ``derivs``.  NaN where the status is not ``CONVERGED``.
+    """
+    stop = jax.lax.stop_gradient
+    n, dof = us.shape
+    m = mech.m
+    d = guess.shape[0]
+    dtype = guess.dtype
+    # Non-finite inputs and parameters are replaced once, here, by harmless values (their
+    # samples are flagged): no derivative code ever sees a NaN that could leak into a batch
+    # gradient.
+    us_fin = jnp.all(jnp.isfinite(us), axis=-1)
+    us_s = jnp.where(jnp.isfinite(us), us, 0.0)
+    p_fin = jnp.ones((d,), bool)
+    for v in p.values():
+        p_fin = p_fin & jnp.isfinite(v)
+    p_s = {k_: jnp.where(jnp.isfinite(v), v, 1.0) for k_, v in p.items()}
+    ps = jax.tree_util.tree_map(stop, p_s)
+    g0 = stop(jnp.where(jnp.isfinite(guess), guess, 0.0))
+
+    # Blocks: block 0 is the first input repeated (its last point is the first anchor, solved
+    # from the user's guess); blocks 1.. cover points 1..n-1, the last padded by repetition.
+    k = _block_size(n, options.anchors)
+    nblk = -(-(n - 1) // k) if n > 1 else 0
+    rest = jnp.concatenate([us_s[1:], jnp.broadcast_to(us_s[-1:], (nblk * k - (n - 1), dof))]) if n > 1 else us_s[:0]
+    blocks = jnp.concatenate([jnp.broadcast_to(us_s[:1], (1, k, dof)), rest.reshape(nblk, k, dof)])
+
+    if mech.branch is not None:
+        b0 = jnp.sign(jax.vmap(lambda g_, p_: mech.branch_value(g_, us_s[0], p_))(g0, ps))
+    else:
+        b0 = jnp.zeros((d,), dtype)
+    scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
+
+    def guesses(q_a, d1_a, d2_a, u_a, b_, p_, s_, u_blk):
+        """One design's block of guesses ``(k, m)`` from its anchor's guarded predictor."""
+
+        def one(u):
+            g = predict(q_a, d1_a, d2_a, u - u_a, s_, options.max_step)
+            # a predictor off the stroke's branch: start at the anchor itself
+            return jnp.where(on_branch_value(b_, mech.branch_value(g, u, p_)), g, q_a)
+
+        return jax.vmap(one)(u_blk)
+
+    def per_block(fn, u_blk, *args):
+        """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points (inner)."""
+        return jax.vmap(lambda p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_blk, *pts))(ps, b0, *args)
+
+    def robust(fields, u_blk, g):
+        """Points that failed the checked step: the full Newton kernel (one ``lax.cond`` per
+        block, so a clean block never runs it)."""
+
+        def one(u, p_, b_, g_):
+            q, st, steps, rn, cond, br = newton(mech, options, u, p_, g_)
+            # converged, but on another branch than the stroke's: BRANCH
+            st = jnp.where((st == Status.CONVERGED) & ~on_branch_value(b_, br), Status.BRANCH, st)
+            return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
+
+        new = per_block(one, u_blk, g)
+        lean_ok = fields[2] == Status.CONVERGED  # fields: (q_eval, q, status, steps, rn, cond, br)
+        pick = lambda a_, b_: jnp.where(lean_ok.reshape(lean_ok.shape + (1,) * (a_.ndim - 2)), a_, b_)  # noqa: E731
+        # the robust kernel's root is also where its derivatives are taken
+        return tuple(pick(a_, b_) for a_, b_ in zip(fields, (new[0],) + new))
+
+    def derivatives(q, u, ok):
+        return jax.vmap(jax.vmap(lambda q_, u_, p_, ok_: root_derivatives(mech, q_, u_, p_, ok_), (0, 0, None, 0)), (0, None, 0, 0))(q, u, ps, ok)
+
+    def scan_fn(carry, u_blk):
+        q_a, d1_a, d2_a, u_a = carry
+        g = jax.vmap(guesses, (0, 0, 0, 0, 0, 0, 0, None))(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
+        q1, qf, ok, rn, cond, br = per_block(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
+        status = jnp.where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
+
+        def with_derivatives(q_eval, good):
+            if derivs:  # every point's dq/du and d2q/du2 (the last one's also serve the next anchor)
+                d1, d2 = derivatives(jnp.where(good[..., None], q_eval, 0.0), u_blk, good)
+                return d1, d2, d1[:, -1], d2[:, -1]
+            e1, e2 = derivatives(jnp.where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[-1:], good[:, -1:])
+            return None, None, e1[:, 0], e2[:, 0]
+
+        # derivatives at the checked step's iterate share its sines and cosines
+        fields = (qf, status, jnp.ones(ok.shape, jnp.int32), rn, cond, br) + with_derivatives(q1, ok)
+
+        def fallback(fields):
+            q_eval, qf, status, steps, rn, cond, br = robust(fields[:1] + fields[:6], u_blk, g)
+            return (qf, status, steps, rn, cond, br) + with_derivatives(q_eval, status == Status.CONVERGED)
+
+        qf, status, steps, rn, cond, br, d1, d2, e1, e2 = jax.lax.cond(jnp.any(~ok), fallback, lambda f: f, fields)
+        # A failed block end is never an anchor: keep the last trusted pose, and drop its
+        # derivatives (root_derivatives gives zeros where the point failed), so the next
+        # block restarts from that pose instead of a series extrapolated across the gap.
+        last_ok = status[:, -1] == Status.CONVERGED
+        q_next = jnp.where(last_ok[:, None], qf[:, -1], q_a)
+        u_next = jnp.where(last_ok[:, None], u_blk[-1], u_a)
+        return (q_next, e1, e2, u_next), (qf, status, steps, rn, cond, br, d1, d2)
+
+    init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), jnp.broadcast_to(us_s[0], (d, dof)))
+    _, out = jax.lax.scan(scan_fn, init, blocks)
+    # (nblk + 1, D, k, ...) -> (D, n, ...): point 0 is block 0's last entry
+    out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n_out], out)
+    q, status, steps, rn, cond, br, d1, d2 = out
+    inputs_ok = p_fin[:, None] & us_fin[None, :n_out] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
+    status = jnp.where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
+    ok = status == Status.CONVERGED
+    q_star = jnp.where(ok[..., None], q, jnp.nan)
+
+    # Attach the roots to (u, p): derivatives by the implicit function theorem.
+    u_out = us_s[:n_out]
+    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, None, 0))(q_star, ok, u_out, p)
+    if derivs:
+        d1 = jnp.where(ok[..., None, None], d1, jnp.nan)
+        d2 = jnp.where(ok[..., None, None, None], d2, jnp.nan)
+        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, None, 0))(d1, d2, q_star, ok, u_out, p)
+    res = (q, status, steps, rn, cond, br, d1, d2)
+    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
+
+
+def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, anchors: int | None = None):
+    """Checks, broadcasting and shape bucketing shared by ``solve_stroke`` and
+    ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``)."""
+    if anchors is not None and anchors != options.anchors:
+        import dataclasses
+
+        options = dataclasses.replace(options, anchors=int(anchors))
+    us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
+    if us_.ndim != 2 or us_.shape[0] < 1:
+        raise ValueError(f"{mech.name}: us must be one stroke of shape (N,) or (N, {mech.dof}) with N >= 1, got {jnp.shape(us)}")
+    shapes = {f"p[{k!r}]": v.shape for k, v in p.items()}
+    shapes["guess"] = guess.shape[:-1]
+    shape = batch_shape(mech, shapes)
+    if len(shape) > 1:
+        raise ValueError(f"{mech.name}: solve_stroke takes one batch axis of designs, got batch shape {shape}")
+    single = shape == ()
+    d = 1 if single else shape[0]
+    pf = {k: jnp.broadcast_to(v, (d,)) for k, v in p.items()}
+    gf = jnp.broadcast_to(guess, (d, mech.m))
+    n = us_.shape[0]
+    nb = bucket(n)
+    us_b = jnp.concatenate([us_, jnp.broadcast_to(us_[-1:], (nb - n, us_.shape[1]))]) if nb > n else us_
+    q, status, steps, rn, cond, br, d1, d2 = _stroke_program(mech, options, n, bool(derivs), single, us_b, pf, gf)
+    sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, coords=mech.coords)
+    return sol, d1, d2
+
+
+def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int | None = None, throw: bool = False) -> Solution:
+    """Solve a whole stroke by continuation, for one design or a batch of designs.
+
+    **Arguments**
+
+    - `us`: the stroke, ``(N,)`` for one input or ``(N, dof)``, in order along the path.
+    - `p`: parameters; scalar leaves for one design, or leaves of shape ``(D,)`` for D designs.
+    - `guess`: coordinates at ``us[0]``, ``(m,)`` or ``(D, m)``: it picks the branch, which
+      continuation then keeps (``BRANCH`` status where only the other branch closes).
+    - `options`: ``SolverOptions`` (``options.anchors``: how many points are solved in
+      sequence; more anchors are safer near toggles and slower).
+    - `anchors`: shorthand for ``options.anchors``.
+    - `throw`: raise ``RuntimeError`` if any sample did not converge.
+
+    **Returns** a ``Solution`` with shape ``(N, ...)`` for one design, ``(D, N, ...)`` for D;
+    differentiable in ``us`` and ``p`` by the implicit function theorem.
+    """
+    sol, _, _ = stroke(mech, us, p, guess, options, derivs=False, anchors=anchors)
+    if throw:
+        raise_if_failed(sol)
+    return sol
