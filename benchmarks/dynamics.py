@@ -33,7 +33,8 @@ import jaxmech  # noqa: E402
 from jaxmech import Mechanism, cis  # noqa: E402
 from jaxmech import dynamics as D  # noqa: E402
 from jaxmech.actuators import DCMotor  # noqa: E402
-from jaxmech.solve import SolverOptions, solve_stroke  # noqa: E402
+from jaxmech.continuation import solve_stroke  # noqa: E402
+from jaxmech.solve import SolverOptions  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

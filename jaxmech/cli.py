@@ -45,18 +45,11 @@ class _Parser(argparse.ArgumentParser):
 
 # --------------------------------------------------------------------------- setup
 def _setup_jax():
-    """float64 and a persistent compilation cache; called before any array exists."""
+    """float64; called before any array exists."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    if not os.environ.get("JAX_COMPILATION_CACHE_DIR") and jax.config.jax_compilation_cache_dir is None:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-        cache = base / "jaxmech" / "xla"
-        try:
-            cache.mkdir(parents=True, exist_ok=True)
-        except OSError:
-            return  # a read-only home: run without the cache
-        jax.config.update("jax_compilation_cache_dir", str(cache))
+    # the persistent compilation cache is switched on by `import jaxmech` (jaxmech.cache)
 
 
 # --------------------------------------------------------------------------- argument parsing

@@ -30,6 +30,8 @@ give the same angles and statuses) and so that a negative length is caught early
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -121,7 +123,12 @@ def _names(value, what: str) -> tuple[str, ...]:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Mechanism:
-    """Static description of a planar mechanism (hashable by identity, safe as a jit static).
+    """Static description of a planar mechanism (hashable, safe as a jit static argument).
+
+    Two mechanisms are equal when their names and the programs their functions trace to
+    (constraints, points, branch indicator, residual scale: the jaxprs and their captured
+    constants) are equal, so an identical mechanism rebuilt in a notebook cell reuses
+    everything already compiled for the first.
 
     **Arguments**
 
@@ -178,6 +185,43 @@ class Mechanism:
         set_("points", dict(self.points))
         if not callable(self.constraints):
             raise ValueError("constraints must be a function fn(q, u, p) -> sequence of equations")
+
+    # ------------------------------------------------------------------ identity
+    @functools.cached_property
+    def _key(self):
+        """What a compiled program depends on: names and the traced programs of every function."""
+        static = (self.name, self.coords, self.inputs, self.params, self.lengths, self.signed, tuple(self.points))
+        dtype = jnp.zeros(()).dtype
+        q = jax.ShapeDtypeStruct((self.m,), dtype)
+        u = jax.ShapeDtypeStruct((self.dof,), dtype)
+        p = {n: jax.ShapeDtypeStruct((), dtype) for n in self.params}
+        fns = {"residual": self.residual}
+        if self.branch is not None:
+            fns["branch"] = self.branch_value
+        for name in self.points:
+            fns[f"point {name}"] = functools.partial(self.point, name)
+        digest = hashlib.sha256(repr((static, str(dtype))).encode())
+        try:
+            for label, fn in fns.items():
+                closed = jax.make_jaxpr(fn)(q, u, p)
+                digest.update(label.encode() + str(closed.jaxpr).encode())
+                for c in closed.consts:
+                    c = np.asarray(c)
+                    digest.update(repr((c.shape, str(c.dtype))).encode() + c.tobytes())
+            if self.residual_scale is not None:
+                closed = jax.make_jaxpr(lambda p_: self.residual_scale(self.vars_p(p_)))(p)
+                digest.update(b"scale" + str(closed.jaxpr).encode())
+                for c in closed.consts:
+                    digest.update(np.asarray(c).tobytes())
+        except Exception:  # a function that does not trace: identity (its error shows at solve time)
+            return ("id", id(self))
+        return ("jaxpr", digest.hexdigest())
+
+    def __eq__(self, other):
+        return self is other or (isinstance(other, Mechanism) and self._key == other._key)
+
+    def __hash__(self):
+        return hash(self._key)
 
     # ------------------------------------------------------------------ structure
     @property

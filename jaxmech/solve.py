@@ -382,11 +382,19 @@ def _stack_named(mech: Mechanism, names, values: Mapping, what: str, kind: str):
     missing = [k for k in names if k not in values]
     if missing:
         raise ValueError(f"{mech.name}: missing {kind}(s) {missing} in {what}")
-    return jnp.stack(jnp.broadcast_arrays(*[jnp.asarray(values[k]) for k in names]), axis=-1)
+    xp = _xp(*values.values())
+    return xp.stack(xp.broadcast_arrays(*[xp.asarray(values[k]) for k in names]), axis=-1)
+
+
+def _xp(*values):
+    """numpy for concrete values, jax.numpy inside a trace.  Input handling on the host: an
+    eager jnp op on a new shape compiles a small program of its own (10-50 ms each)."""
+    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(values))
+    return jnp if traced else np
 
 
 def _with_last_axis(mech: Mechanism, x, names, what: str, kind: str):
-    x = jnp.asarray(x)
+    x = _xp(x).asarray(x)
     if x.ndim == 0 or x.shape[-1] != len(names):
         raise ValueError(f"{mech.name}: {what} must have a last axis of size {len(names)} ({kind}s {names}), got shape {x.shape}")
     return x
@@ -398,7 +406,7 @@ def as_inputs(mech: Mechanism, u, what="u"):
     if isinstance(u, Mapping):
         return _stack_named(mech, mech.inputs, u, what, "input")
     if mech.dof == 1:
-        return jnp.asarray(u)[..., None]
+        return _xp(u).asarray(u)[..., None]
     return _with_last_axis(mech, u, mech.inputs, what, "input")
 
 
@@ -430,12 +438,12 @@ def prepare(mech: Mechanism, u, p, guess, options: SolverOptions, u_what="u"):
     _check_dtype(options, {u_what: u, "p": p, "guess": guess})
     u = as_inputs(mech, u, u_what)
     guess = as_coords(mech, guess)
-    dtype = jnp.result_type(u, guess, *[jnp.asarray(v) for v in p.values()], float)
+    dtype = jnp.result_type(u, guess, *[_xp(v).asarray(v) for v in p.values()], float)
     if options.dtype is not None:
         dtype = jnp.dtype(options.dtype)
     u = u.astype(dtype)
     guess = guess.astype(dtype)
-    p = {k: jnp.asarray(p[k], dtype) for k in mech.params}
+    p = {k: _xp(p[k]).asarray(p[k], dtype) for k in mech.params}
     return u, p, guess
 
 

@@ -67,7 +67,7 @@ from ..actuators import DCMotor
 from ..dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
 from ..kinematics import Motion
 from ..mechanism import Mechanism, cis
-from ..solve import solve_stroke
+from ..continuation import solve_stroke
 from ..status import Status
 from .base import Scene
 

@@ -1,0 +1,283 @@
+"""Time to first answer: each case in a fresh Python process, cold and warm compile cache.
+
+A user meets the compile before the steady state.  Every case runs as its own subprocess,
+first with an empty persistent compilation cache (``cold``), then again with the cache the
+first run filled (``warm``).  Inside the subprocess the time is split by JAX's own
+``jax.monitoring`` duration events: import, tracing (jaxpr), lowering (jaxpr -> StableHLO),
+XLA compile, and the rest (running, Python); cache hits are counted.  ``JAX_DUMP_IR_TO``
+collects every compiled module, so the HLO size (StableHLO lines) of each compiled function
+is recorded too.  Beside them, in the same run: the seeds' method for the four-bar job (a
+scipy ``fsolve`` loop with 2x2 solves for velocity and acceleration, as a new user would
+write it) and pylinkage's first call (when installed), each as a whole process.
+
+Run: ``python -m benchmarks.latency [--quick] [--cases a,b]``; writes
+``results/latency.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+from benchmarks.common import base_parser, write_result
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# --------------------------------------------------------------------------- what each subprocess runs
+_PRELUDE = """
+import json, os, sys, time
+t_start = time.perf_counter()
+import jax
+jax.config.update("jax_enable_x64", True)
+EVENTS = {}
+HITS = [0]
+def _on_duration(event, duration, **kw):
+    EVENTS[event] = EVENTS.get(event, 0.0) + duration
+def _on_event(event, **kw):
+    if event == "/jax/compilation_cache/cache_hits":
+        HITS[0] += 1
+jax.monitoring.register_event_duration_secs_listener(_on_duration)
+jax.monitoring.register_event_listener(_on_event)
+import jax.numpy as jnp
+import numpy as np
+import jaxmech as jm
+t_import = time.perf_counter() - t_start
+MARKS = {}
+def mark(name, t0):
+    MARKS[name] = time.perf_counter() - t0
+"""
+
+_EPILOGUE = """
+out = {"import_s": t_import, "job_s": time.perf_counter() - t_start - t_import, "marks": MARKS,
+       "trace_s": EVENTS.get("/jax/core/compile/jaxpr_trace_duration", 0.0),
+       "lower_s": EVENTS.get("/jax/core/compile/jaxpr_to_mlir_module_duration", 0.0),
+       "xla_compile_s": EVENTS.get("/jax/core/compile/backend_compile_duration", 0.0),
+       "cache_hits": HITS[0]}
+print("LATENCY_JSON " + json.dumps(out))
+"""
+
+_FOURBAR = """
+fourbar = jm.Mechanism(
+    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+    constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d],
+    branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+)
+p = dict(a=1.0, b=3.0, c=2.5, d=3.5)
+"""
+
+CASES: dict[str, str] = {
+    "fourbar_stroke": _FOURBAR + """
+t0 = time.perf_counter()
+sol, d1, d2 = jm.stroke_kinematics(fourbar, jnp.linspace(0, 2 * np.pi, 361), p, jnp.array([0.4, 1.7]))
+jax.block_until_ready(d2)
+mark("first_stroke_s", t0)
+""",
+    "fourbar_rebuild_and_resize": _FOURBAR + """
+us = np.linspace(0, 2 * np.pi, 361)
+jax.block_until_ready(jm.stroke_kinematics(fourbar, us, p, jnp.array([0.4, 1.7])))
+t0 = time.perf_counter()
+again = jm.Mechanism(
+    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+    constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d],
+    branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+)
+jax.block_until_ready(jm.stroke_kinematics(again, us, p, jnp.array([0.4, 1.7])))
+mark("rebuilt_identical_s", t0)
+t0 = time.perf_counter()
+jax.block_until_ready(jm.stroke_kinematics(again, np.linspace(0, 2 * np.pi, 362), p, jnp.array([0.4, 1.7])))
+mark("one_more_point_s", t0)
+""",
+    "sixbar_stroke": """
+sixbar = jm.Mechanism(
+    name="watt_sixbar", coords=("theta3", "theta4", "theta5", "theta6"), inputs=("theta2",),
+    params=("a", "b", "c", "d", "e", "f", "g", "h", "k", "gamma"), lengths=("a", "b", "c", "d", "e", "f", "g", "h", "k"),
+    signed=("h", "k"),
+    constraints=lambda q, u, p: [
+        p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d,
+        p.d + p.e * jm.cis(q.theta4 + p.gamma) + p.f * jm.cis(q.theta5) - p.g * jm.cis(q.theta6) - (p.h + 1j * p.k),
+    ],
+)
+p = dict(a=1.0, b=3.0, c=2.5, d=3.5, e=1.5, f=3.0, g=2.0, h=5.0, k=2.0, gamma=0.6)
+t0 = time.perf_counter()
+sol, d1, d2 = jm.stroke_kinematics(sixbar, jnp.linspace(0.3, 0.3 + 2 * np.pi, 361), p, jnp.array([0.6, 1.9, 1.06, 2.15]))
+jax.block_until_ready(d2)
+mark("first_stroke_s", t0)
+""",
+    "fourbar_inverse_dynamics": """
+from jaxmech.scenes.classic import fourbar_mechanism as fourbar
+model = jm.Model(fourbar, bodies=[jm.Body("G3", "m3", angle="theta3", inertia="J3")], loads=[jm.Gravity()])
+""",
+    "fourbar_gradient": _FOURBAR + """
+t0 = time.perf_counter()
+def figure(p):
+    sol, d1, d2 = jm.stroke_kinematics(fourbar, jnp.linspace(0, 2 * np.pi, 361), p, jnp.array([0.4, 1.7]))
+    return jnp.max(jnp.abs(d1[:, 1, 0]))
+g = jax.grad(figure)({k: jnp.asarray(v) for k, v in p.items()})
+jax.block_until_ready(g)
+mark("gradient_s", t0)
+""",
+}
+
+for _scene in ("flap_msd", "landing_gear", "arc_track_flap", "sma_flap"):
+    CASES[f"run_scene_{_scene}"] = f"""
+from jaxmech.scenes import get_scene
+from jaxmech.scenes.base import run_scene
+t0 = time.perf_counter()
+res = run_scene(get_scene("{_scene}"), 101)
+jax.block_until_ready(jax.tree_util.tree_leaves(res))
+mark("run_scene_s", t0)
+"""
+
+CLI_CASES = {"cli_run_fourbar": ["run", "fourbar"], "cli_run_flap_msd": ["run", "flap_msd"]}
+
+FSOLVE_FOURBAR = """
+import numpy as np
+from scipy.optimize import fsolve
+a, b, c, d = 1.0, 3.0, 2.5, 3.5
+def f(x, t2):
+    t3, t4 = x
+    return [a * np.cos(t2) + b * np.cos(t3) - c * np.cos(t4) - d, a * np.sin(t2) + b * np.sin(t3) - c * np.sin(t4)]
+th = np.linspace(0, 2 * np.pi, 361)
+q = np.zeros((361, 2)); qd = np.zeros_like(q); qdd = np.zeros_like(q); g = np.array([0.4, 1.7])
+for i, t in enumerate(th):
+    g = fsolve(f, g, args=(t,), xtol=1e-13); q[i] = g
+    J = np.array([[-b * np.sin(g[0]), c * np.sin(g[1])], [b * np.cos(g[0]), -c * np.cos(g[1])]])
+    qd[i] = np.linalg.solve(J, -np.array([-a * np.sin(t), a * np.cos(t)]))
+    w3, w4 = qd[i]
+    rhs = -np.array([-a * np.cos(t) - b * np.cos(g[0]) * w3**2 + c * np.cos(g[1]) * w4**2,
+                     -a * np.sin(t) - b * np.sin(g[0]) * w3**2 + c * np.sin(g[1]) * w4**2])
+    qdd[i] = np.linalg.solve(J, rhs)
+"""
+
+PYLINKAGE_FOURBAR = """
+import pylinkage as pl
+crank = pl.Crank(0, 1, joint0=(0, 0), angle=2 * 3.141592653589793 / 361, distance=1.0)
+pin = pl.Revolute(3, 2, joint0=crank, joint1=(3.5, 0), distance0=3.0, distance1=2.5)
+linkage = pl.Linkage(joints=(crank, pin), order=(crank, pin))
+loci = list(linkage.step(iterations=361))
+"""
+
+
+def _script(case: str) -> str:
+    body = CASES[case]
+    if case == "fourbar_inverse_dynamics":
+        body += """
+p = dict(a=1.0, b=3.0, c=2.5, d=3.5, m3=2.0, J3=1.5, g=9.81)
+t0 = time.perf_counter()
+res = jm.inverse_dynamics(model, jm.ConstantSpeed(0.0, 1.0), jnp.linspace(0, 2 * jnp.pi, 361), p, jnp.array([0.4, 1.7]))
+jax.block_until_ready(res.tau)
+mark("inverse_dynamics_s", t0)
+"""
+    return _PRELUDE + textwrap.dedent(body) + _EPILOGUE
+
+
+def _hlo_sizes(dump_dir: Path) -> dict[str, int]:
+    """StableHLO lines of every module JAX lowered (``JAX_DUMP_IR_TO``), by function name."""
+    sizes: dict[str, int] = {}
+    for f in sorted(dump_dir.glob("*.mlir")):
+        n = sum(1 for _ in f.open())
+        sizes[f.stem] = n
+    return sizes
+
+
+def _env(cache: Path | None, dump: Path | None) -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    if cache is None:
+        env["JAXMECH_COMPILE_CACHE"] = "0"
+    else:
+        env["JAXMECH_COMPILE_CACHE"] = str(cache)
+    if dump is not None:
+        env["JAX_DUMP_IR_TO"] = str(dump)
+    env.setdefault("PYTHONPATH", str(ROOT))
+    return env
+
+
+def _run(args: list[str], env: dict[str, str], timeout: float = 600) -> tuple[float, str, int]:
+    t0 = time.perf_counter()
+    proc = subprocess.run(args, env=env, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    return time.perf_counter() - t0, proc.stdout + proc.stderr, proc.returncode
+
+
+def run_case(case: str, cache: Path) -> dict:
+    """One case, cold (empty ``cache``) then warm (the same ``cache``): the split per run."""
+    out: dict = {}
+    for label in ("cold", "warm"):
+        dump = Path(tempfile.mkdtemp(prefix="jaxmech-ir-")) if label == "cold" else None
+        wall, text, rc = _run([sys.executable, "-c", _script(case)], _env(cache, dump))
+        row: dict = {"process_s": wall, "returncode": rc}
+        for line in text.splitlines():
+            if line.startswith("LATENCY_JSON "):
+                row.update(json.loads(line[len("LATENCY_JSON "):]))
+        if rc != 0:
+            row["error"] = text[-2000:]
+        if dump is not None:
+            row["hlo_lines"] = _hlo_sizes(dump)
+        out[label] = row
+    return out
+
+
+def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path) -> dict:
+    out: dict = {}
+    exe = [sys.executable, "-m", "jaxmech.cli"]
+    for label in ("cold", "warm"):
+        wall, text, rc = _run(exe + argv + ["--out", str(out_dir / label)], _env(cache, None))
+        out[label] = {"process_s": wall, "returncode": rc, **({"error": text[-2000:]} if rc else {})}
+    return out
+
+
+def run_reference(script: str) -> dict:
+    wall, text, rc = _run([sys.executable, "-c", script], dict(os.environ))
+    return {"process_s": wall, "returncode": rc, **({"error": text[-500:]} if rc else {})}
+
+
+def run(quick: bool = False, cases: list[str] | None = None) -> dict:
+    names = cases or (["fourbar_stroke", "fourbar_rebuild_and_resize"] if quick else list(CASES) + list(CLI_CASES))
+    result: dict = {"cases": {}, "reference": {}}
+    result["reference"]["fsolve_fourbar"] = min((run_reference(FSOLVE_FOURBAR) for _ in range(3)), key=lambda r: r["process_s"])
+    result["reference"]["python_empty"] = run_reference("pass")
+    try:
+        import pylinkage  # noqa: F401
+
+        result["reference"]["pylinkage_fourbar"] = run_reference(PYLINKAGE_FOURBAR)
+    except ImportError:
+        result["reference"]["pylinkage_fourbar"] = {"skipped": "pylinkage not installed (pip install -e '.[bench]')"}
+    with tempfile.TemporaryDirectory(prefix="jaxmech-latency-") as tmp:
+        for name in names:
+            cache = Path(tmp) / name
+            if name in CLI_CASES:
+                result["cases"][name] = run_cli(name, CLI_CASES[name], cache, Path(tmp) / f"{name}-out")
+            else:
+                result["cases"][name] = run_case(name, cache)
+            c = result["cases"][name]
+            print(f"{name:32s} cold {c['cold']['process_s']:6.2f} s   warm {c['warm']['process_s']:6.2f} s"
+                  + ("" if c["cold"].get("returncode", 0) == 0 else "   FAILED"), flush=True)
+    fs = result["reference"]["fsolve_fourbar"]["process_s"]
+    fb = result["cases"].get("fourbar_stroke")
+    if fb:
+        result["ratios"] = {
+            "fourbar_process_vs_fsolve_process": fb["cold"]["process_s"] / fs,
+            "fourbar_after_import_s": fb["cold"].get("job_s"),
+        }
+    return result
+
+
+def main(argv=None):
+    parser = base_parser(__doc__.splitlines()[0])
+    parser.add_argument("--cases", default=None, help="comma-separated case names (default: all)")
+    args = parser.parse_args(argv)
+    cases = args.cases.split(",") if args.cases else None
+    res = run(quick=args.quick, cases=cases)
+    path = write_result("latency", res, out_dir=args.out)
+    print(json.dumps(res.get("ratios", {}), indent=1))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
