@@ -19,6 +19,7 @@ a few sizes per octave, so 361 and 362 points share one compiled program.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Mapping
 
@@ -258,59 +259,6 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     """Checks, broadcasting and shape bucketing shared by ``solve_stroke`` and
     ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``)."""
     if anchors is not None and anchors != options.anchors:
-        import dataclasses
-
-        options = dataclasses.replace(options, anchors=int(anchors))
-    us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
-    if us_.ndim != 2 or us_.shape[0] < 1:
-        raise ValueError(f"{mech.name}: us must be one stroke of shape (N,) or (N, {mech.dof}) with N >= 1, got {jnp.shape(us)}")
-    shapes = {f"p[{k!r}]": v.shape for k, v in p.items()}
-    shapes["guess"] = guess.shape[:-1]
-    shape = batch_shape(mech, shapes)
-    if len(shape) > 1:
-        raise ValueError(f"{mech.name}: solve_stroke takes one batch axis of designs, got batch shape {shape}")
-    single = shape == ()
-    d = 1 if single else shape[0]
-    # Concrete arguments are padded and sliced on the host (numpy): an eager jnp op on a new
-    # shape compiles a small program of its own (10-50 ms each).
-    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((us_, p, guess)))
-    xp = jnp if traced else np
-    pf = {k: xp.broadcast_to(v, (d,)) for k, v in p.items()}
-    gf = xp.broadcast_to(guess, (d, mech.m))
-    n = us_.shape[0]
-    nb = bucket(n)
-    if nb > n:  # pad by repeating the last input
-        us_ = xp.concatenate([us_, xp.repeat(us_[-1:], nb - n, axis=0)])
-    out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf)
-    if nb > n:
-        axis = 0 if single else 1
-        if traced:
-            out = jax.tree_util.tree_map(lambda x: jax.lax.slice_in_dim(x, 0, n, axis=axis), out)
-        else:
-            out = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x).take(np.arange(n), axis=axis)), out)
-    q, status, steps, rn, cond, br, d1, d2 = out
-    inputs_ok = p_fin[:, None] & us_fin[None, :n_out] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
-    status = jnp.where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
-    ok = status == Status.CONVERGED
-    q_star = jnp.where(ok[..., None], q, jnp.nan)
-
-    # Attach the roots to (u, p): derivatives by the implicit function theorem.
-    u_out = us_s[:n_out]
-    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, None, 0))(q_star, ok, u_out, p)
-    if derivs:
-        d1 = jnp.where(ok[..., None, None], d1, jnp.nan)
-        d2 = jnp.where(ok[..., None, None, None], d2, jnp.nan)
-        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, None, 0))(d1, d2, q_star, ok, u_out, p)
-    res = (q, status, steps, rn, cond, br, d1, d2)
-    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
-
-
-def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, anchors: int | None = None):
-    """Checks, broadcasting and shape bucketing shared by ``solve_stroke`` and
-    ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``)."""
-    if anchors is not None and anchors != options.anchors:
-        import dataclasses
-
         options = dataclasses.replace(options, anchors=int(anchors))
     us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
     if us_.ndim != 2 or us_.shape[0] < 1:
