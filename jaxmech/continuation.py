@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import cond1, small_max, small_norm, solve_small
+from ._linalg import cond1, small_max, small_norm, solve_small, where
 from ._xla import unfused
 from .mechanism import Mechanism
 from .solve import (
@@ -69,9 +69,9 @@ def _trusted_terms(d1, d2, du, s, max_step):
     second = 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
     size = lambda x: small_max(jnp.abs(x) / s)  # noqa: E731
     keep2 = size(second) <= 0.25 * size(first)
-    step = jnp.where(keep2, first + second, first)
+    step = where(keep2, first + second, first)
     keep1 = size(step) <= max_step
-    return jnp.where(keep1, d1, 0.0), jnp.where(keep1 & keep2, d2, 0.0)
+    return where(keep1, d1, 0.0), where(keep1 & keep2, d2, 0.0)
 
 
 def predict(q, d1, d2, du, s, max_step):
@@ -105,7 +105,7 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
     r, js = evaluate(guess)
     q = guess - solve_small(js, r) * s
     finite_q = jnp.all(jnp.isfinite(q))
-    q = jnp.where(finite_q, q, jnp.zeros_like(q))
+    q = where(finite_q, q, jnp.zeros_like(q))
     r, js = evaluate(q)
     dz = solve_small(js, r)
     rn = small_norm(r)
@@ -113,7 +113,7 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
     br = mech.branch_value(q, u, p)
     ok = (small_max(jnp.abs(dz)) <= _lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
     ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch_value(b0, br)
-    qf = jnp.where(ok, q - dz * s, q)
+    qf = where(ok, q - dz * s, q)
     # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
     packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
     return q, packed[:-1], packed[-1] > 0.5, rn, cond, br
@@ -151,13 +151,13 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     # samples are flagged): no derivative code ever sees a NaN that could leak into a batch
     # gradient.
     us_fin = jnp.all(jnp.isfinite(us), axis=-1)
-    us_s = jnp.where(jnp.isfinite(us), us, 0.0)
+    us_s = where(jnp.isfinite(us), us, 0.0)
     p_fin = jnp.ones((d,), bool)
     for v in p.values():
         p_fin = p_fin & jnp.isfinite(v)
-    p_s = {k_: jnp.where(jnp.isfinite(v), v, 1.0) for k_, v in p.items()}
+    p_s = {k_: where(jnp.isfinite(v), v, 1.0) for k_, v in p.items()}
     ps = jax.tree_util.tree_map(stop, p_s)
-    g0 = stop(jnp.where(jnp.isfinite(guess), guess, 0.0))
+    g0 = stop(where(jnp.isfinite(guess), guess, 0.0))
 
     # Blocks: block 0 is the first input repeated (its last point is the first anchor, solved
     # from the user's guess); blocks 1.. cover points 1..n-1, the last padded by repetition.
@@ -178,7 +178,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         def one(u):
             g = predict(q_a, d1_a, d2_a, u - u_a, s_, options.max_step)
             # a predictor off the stroke's branch: start at the anchor itself
-            return jnp.where(on_branch_value(b_, mech.branch_value(g, u, p_)), g, q_a)
+            return where(on_branch_value(b_, mech.branch_value(g, u, p_)), g, q_a)
 
         return jax.vmap(one)(u_blk)
 
@@ -193,12 +193,12 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         def one(u, p_, b_, g_):
             q, st, steps, rn, cond, br = newton(mech, options, u, p_, g_)
             # converged, but on another branch than the stroke's: BRANCH
-            st = jnp.where((st == Status.CONVERGED) & ~on_branch_value(b_, br), Status.BRANCH, st)
+            st = where((st == Status.CONVERGED) & ~on_branch_value(b_, br), Status.BRANCH, st)
             return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
 
         new = per_block(one, u_blk, g)
         lean_ok = fields[2] == Status.CONVERGED  # fields: (q_eval, q, status, steps, rn, cond, br)
-        pick = lambda a_, b_: jnp.where(lean_ok.reshape(lean_ok.shape + (1,) * (a_.ndim - 2)), a_, b_)  # noqa: E731
+        pick = lambda a_, b_: where(lean_ok.reshape(lean_ok.shape + (1,) * (a_.ndim - 2)), a_, b_)  # noqa: E731
         # the robust kernel's root is also where its derivatives are taken
         return tuple(pick(a_, b_) for a_, b_ in zip(fields, (new[0],) + new))
 
@@ -209,13 +209,13 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         q_a, d1_a, d2_a, u_a = carry
         g = jax.vmap(guesses, (0, 0, 0, 0, 0, 0, 0, None))(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
         q1, qf, ok, rn, cond, br = per_block(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
-        status = jnp.where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
+        status = where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
 
         def with_derivatives(q_eval, good):
             if derivs:  # every point's dq/du and d2q/du2 (the last one's also serve the next anchor)
-                d1, d2 = derivatives(jnp.where(good[..., None], q_eval, 0.0), u_blk, good)
+                d1, d2 = derivatives(where(good[..., None], q_eval, 0.0), u_blk, good)
                 return d1, d2, d1[:, -1], d2[:, -1]
-            e1, e2 = derivatives(jnp.where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[-1:], good[:, -1:])
+            e1, e2 = derivatives(where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[-1:], good[:, -1:])
             return None, None, e1[:, 0], e2[:, 0]
 
         # derivatives at the checked step's iterate share its sines and cosines
@@ -230,8 +230,8 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         # derivatives (root_derivatives gives zeros where the point failed), so the next
         # block restarts from that pose instead of a series extrapolated across the gap.
         last_ok = status[:, -1] == Status.CONVERGED
-        q_next = jnp.where(last_ok[:, None], qf[:, -1], q_a)
-        u_next = jnp.where(last_ok[:, None], u_blk[-1], u_a)
+        q_next = where(last_ok[:, None], qf[:, -1], q_a)
+        u_next = where(last_ok[:, None], u_blk[-1], u_a)
         return (q_next, e1, e2, u_next), (qf, status, steps, rn, cond, br, d1, d2)
 
     init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), jnp.broadcast_to(us_s[0], (d, dof)))
@@ -240,16 +240,16 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n_out], out)
     q, status, steps, rn, cond, br, d1, d2 = out
     inputs_ok = p_fin[:, None] & us_fin[None, :n_out] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
-    status = jnp.where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
+    status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
     ok = status == Status.CONVERGED
-    q_star = jnp.where(ok[..., None], q, jnp.nan)
+    q_star = where(ok[..., None], q, jnp.nan)
 
     # Attach the roots to (u, p): derivatives by the implicit function theorem.
     u_out = us_s[:n_out]
     q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, None, 0))(q_star, ok, u_out, p)
     if derivs:
-        d1 = jnp.where(ok[..., None, None], d1, jnp.nan)
-        d2 = jnp.where(ok[..., None, None, None], d2, jnp.nan)
+        d1 = where(ok[..., None, None], d1, jnp.nan)
+        d2 = where(ok[..., None, None, None], d2, jnp.nan)
         d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, None, 0))(d1, d2, q_star, ok, u_out, p)
     res = (q, status, steps, rn, cond, br, d1, d2)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import cond1, small_max, small_norm, solve_small
+from ._linalg import cond1, small_max, small_norm, solve_small, where
 from .mechanism import Mechanism
 from .status import Status
 
@@ -123,7 +123,7 @@ def _all_finite(tree) -> jax.Array:
 def coord_scales(mech: Mechanism, p, dtype):
     """``s (m,)``: 1 for angles, the design's length scale for lengths (m)."""
     L = mech.length_scale(p).astype(dtype)
-    return jnp.where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+    return where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
 
 
 def evaluator(mech: Mechanism, u, p, dtype):
@@ -195,10 +195,10 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     def step(r, js, jtj, mu):
         # One solve: Newton (js dz = r) or LM ((js'js + mu D) dz = js' r), chosen by mu.
         lm = mu > 0
-        a = jnp.where(lm, jtj + mu * (jnp.diag(jnp.diag(jtj)) + 1e-12 * eye), js)
-        b = jnp.where(lm, js.T @ r, r)
+        a = where(lm, jtj + mu * (jtj * eye + 1e-12 * eye), js)
+        b = where(lm, js.T @ r, r)
         dz = solve_small(a, b)
-        dz = jnp.where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
+        dz = where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
         size = small_max(jnp.abs(dz))
         # Cap the step: far from a root a Newton step can leap onto another branch.
         return dz * jnp.minimum(1.0, opts.max_step / jnp.maximum(size, tiny)), size
@@ -224,16 +224,16 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         on_branch = same_branch(qt) | ~st.guard
         crossed = st.crossed | (better & ~on_branch)
         accept = better & on_branch
-        q, r, rn, js = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
+        q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
         jtj = js.T @ js
-        mu = jnp.where(accept, jnp.where(st.mu > 1e-6, st.mu / 10.0, 0.0), jnp.maximum(10.0 * st.mu, 1e-3))
+        mu = where(accept, where(st.mu > 1e-6, st.mu / 10.0, 0.0), jnp.maximum(10.0 * st.mu, 1e-3))
         # Steps refused only for crossing the branch are not lack of progress: the damping
         # is still shortening them towards this branch's root.
-        slow = jnp.where(accept & (rtn < 0.9 * st.rn), 0, jnp.where(better & ~on_branch, st.slow, st.slow + 1))
+        slow = where(accept & (rtn < 0.9 * st.rn), 0, where(better & ~on_branch, st.slow, st.slow + 1))
         stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(small_max(jnp.diag(jtj)), 1.0))
         lift = stalled & st.guard & crossed
-        mu = jnp.where(lift, 0.0, mu)
-        slow = jnp.where(lift, 0, slow)
+        mu = where(lift, 0.0, mu)
+        slow = where(lift, 0, slow)
         stalled = stalled & ~lift
         dz, size = step(r, js, jtj, mu)
         converged = (size <= xtol) & (rn <= ftol)
@@ -250,23 +250,23 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     st = jax.lax.while_loop(cond_fn, body, init)
 
     converged = (st.size <= xtol) & (st.rn <= ftol)
-    q = jnp.where(converged, st.q - st.dz * s, st.q)  # the last Newton step is free: it was computed already
+    q = where(converged, st.q - st.dz * s, st.q)  # the last Newton step is free: it was computed already
     cond = cond1(st.js)
     finite = inputs_ok & jnp.isfinite(st.rn) & jnp.all(jnp.isfinite(q))
     closed = st.rn <= ftol
-    status = jnp.where(
+    status = where(
         ~finite,
         Status.NONFINITE,
-        jnp.where(
+        where(
             closed & ((cond > cond_max) | ~converged),
             Status.SINGULAR,
-            jnp.where(converged, Status.CONVERGED, jnp.where(st.stalled, Status.INFEASIBLE, Status.MAX_STEPS)),
+            where(converged, Status.CONVERGED, where(st.stalled, Status.INFEASIBLE, Status.MAX_STEPS)),
         ),
     ).astype(jnp.int32)
     if mech.branch is not None:
         b_sol = mech.branch_value(q, u, p)
         flipped = (b_guess != jnp.sign(b_sol)) & (b_guess != 0)
-        status = jnp.where((status == Status.CONVERGED) & flipped, Status.BRANCH, status).astype(jnp.int32)
+        status = where((status == Status.CONVERGED) & flipped, Status.BRANCH, status).astype(jnp.int32)
         branch = b_sol
     else:
         branch = jnp.asarray(jnp.nan, dtype)
@@ -293,16 +293,16 @@ def _implicit_root_jvp(mech, primals, tangents):
     q = implicit_root(mech, q_star, ok, u, p)  # differentiable again: second order follows
     # Evaluate the rule at a safe point where the sample failed (its NaNs would leak through
     # 0 * NaN in the transposed, reverse-mode, computation).
-    q_s = jnp.where(ok, q, jnp.zeros_like(q))
-    u_s = jnp.where(ok, u, jnp.zeros_like(u))
-    p_s = jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.ones_like(x)), p)
-    du = jnp.where(ok, du, jnp.zeros_like(du))
-    dp = jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.zeros_like(x)), dp)
+    q_s = where(ok, q, jnp.zeros_like(q))
+    u_s = where(ok, u, jnp.zeros_like(u))
+    p_s = jax.tree_util.tree_map(lambda x: where(ok, x, jnp.ones_like(x)), p)
+    du = where(ok, du, jnp.zeros_like(du))
+    dp = jax.tree_util.tree_map(lambda x: where(ok, x, jnp.zeros_like(x)), dp)
     _, rhs = jax.jvp(lambda u_, p_: mech.residual(q_s, u_, p_), (u_s, p_s), (du, dp))
     jac = jax.jacfwd(mech.residual)(q_s, u_s, p_s)
-    jac = jnp.where(ok, jac, jnp.eye(mech.m, dtype=jac.dtype))
+    jac = where(ok, jac, jnp.eye(mech.m, dtype=jac.dtype))
     dq = -solve_small(jac, rhs)
-    return q, jnp.where(ok, dq, jnp.zeros_like(dq))
+    return q, where(ok, dq, jnp.zeros_like(dq))
 
 
 def root_derivatives(mech: Mechanism, q, u, p, ok):
@@ -320,7 +320,7 @@ def root_derivatives(mech: Mechanism, q, u, p, ok):
     """
     m, dof = mech.m, mech.dof
     jq = jax.jacfwd(mech.residual, 0)(q, u, p)
-    jq = jnp.where(ok, jq, jnp.eye(m, dtype=jq.dtype))
+    jq = where(ok, jq, jnp.eye(m, dtype=jq.dtype))
     ju = jax.jacfwd(mech.residual, 1)(q, u, p)
     d1 = -solve_small(jq, ju)
     res = lambda q_, u_: mech.residual(q_, u_, p)  # noqa: E731
@@ -332,7 +332,7 @@ def root_derivatives(mech: Mechanism, q, u, p, ok):
 
     hess = jnp.stack([jnp.stack([second(j, k) for k in range(dof)], axis=-1) for j in range(dof)], axis=-2)
     d2 = -solve_small(jq, hess.reshape(m, dof * dof)).reshape(m, dof, dof)
-    zero_if = lambda x: jnp.where(ok, x, jnp.zeros_like(x))  # noqa: E731
+    zero_if = lambda x: where(ok, x, jnp.zeros_like(x))  # noqa: E731
     return zero_if(d1), zero_if(d2)
 
 
@@ -349,14 +349,14 @@ def attach_derivatives(mech: Mechanism, d1, d2, q_star, ok, u, p):
 def _attach_derivatives_jvp(mech, primals, tangents):
     _, _, q_star, ok, u, p = primals
     _, _, _, _, du, dp = tangents
-    q_s = jnp.where(ok, q_star, jnp.zeros_like(q_star))
+    q_s = where(ok, q_star, jnp.zeros_like(q_star))
 
     def fn(u_, p_):
         e1, e2 = root_derivatives(mech, implicit_root(mech, q_s, ok, u_, p_), u_, p_, ok)
-        return jnp.where(ok, e1, jnp.nan), jnp.where(ok, e2, jnp.nan)
+        return where(ok, e1, jnp.nan), where(ok, e2, jnp.nan)
 
     (e1, e2), (t1, t2) = jax.jvp(fn, (u, p), (du, dp))
-    return (e1, e2), (jnp.where(ok, t1, 0.0), jnp.where(ok, t2, 0.0))
+    return (e1, e2), (where(ok, t1, 0.0), where(ok, t2, 0.0))
 
 
 def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptions()) -> Solution:
@@ -368,7 +368,7 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
     stop = jax.lax.stop_gradient
     q_raw, status, steps, rn, cond, branch = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
     ok = status == Status.CONVERGED
-    q_star = jnp.where(ok, q_raw, jnp.nan)
+    q_star = where(ok, q_raw, jnp.nan)
     q = implicit_root(mech, q_star, ok, u, p)
     return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, coords=mech.coords)
 
