@@ -110,7 +110,13 @@ jax.block_until_ready(d2)
 mark("first_stroke_s", t0)
 """,
     "fourbar_inverse_dynamics": """
-from jaxmech.scenes.classic import fourbar_mechanism as fourbar
+fourbar = jm.Mechanism(
+    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d", "m3", "J3", "g"),
+    lengths=("a", "b", "c", "d"),
+    constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d],
+    points={"G3": lambda q, u, p: p.a * jm.cis(u.theta2) + 0.5 * p.b * jm.cis(q.theta3)},
+    branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+)
 model = jm.Model(fourbar, bodies=[jm.Body("G3", "m3", angle="theta3", inertia="J3")], loads=[jm.Gravity()])
 """,
     "fourbar_gradient": _FOURBAR + """

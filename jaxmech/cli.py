@@ -114,10 +114,35 @@ def _positive(what):
 
 
 def _points(text):
-    v = _positive("--points")(text)
-    if v < 2:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--points must be a whole number, got {text!r}") from None
+    if v < 2:  # a stroke has two ends
         raise argparse.ArgumentTypeError(f"--points must be at least 2, got {v}")
     return v
+
+
+def _check_writable_dir(path: Path, what: str) -> None:
+    """``UsageError`` (one line) unless ``path`` is, or can be made, a writable folder:
+    checked before anything is computed."""
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{what} {str(path)!r} is a file, not a folder; give a folder name")
+    parent = path
+    while not parent.exists():  # the nearest existing ancestor must be a writable folder
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UsageError(f"{what} {str(path)!r} cannot be created: {str(parent)!r} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UsageError(f"{what} {str(path)!r} cannot be written: no write permission in {str(parent)!r}")
+
+
+def _check_writable_file(path: Path, what: str) -> None:
+    """``UsageError`` (one line) unless a file can be written at ``path`` (not a folder;
+    its folder exists or can be made and is writable); checked before computing."""
+    if path.is_dir():
+        raise UsageError(f"{what} {str(path)!r} is a folder; give a file name")
+    _check_writable_dir(path.parent if str(path.parent) else Path("."), f"{what}'s folder for")
 
 
 def _parser() -> _Parser:
@@ -331,10 +356,18 @@ def main(argv=None) -> int:
             raise UsageError("sweep needs at least one --grid NAME=START:STOP:N")
         if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".html"):
             raise UsageError(f"--out must end in .gif or .html, got {args.out!r}")
+        # Destinations are checked before anything is computed.
+        if args.verb in ("run", "report"):
+            _check_writable_dir(Path(args.out), "--out")
+        elif args.verb in ("animate", "sweep") and args.out:
+            _check_writable_file(Path(args.out), "--out")
         _setup_jax()
         return _VERBS[args.verb](args)
     except UsageError as e:
         print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    except OSError as e:  # a destination that failed after the checks (disk full, races)
+        print(f"{PROG}: error: cannot write {e.filename or ''}: {e.strerror or e}".replace("  ", " "), file=sys.stderr)
         return 2
 
 

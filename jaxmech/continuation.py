@@ -55,6 +55,15 @@ def on_branch_value(b0, branch):
     return (b0 == 0) | ~jnp.isfinite(b0) | (jnp.sign(branch) == b0)
 
 
+def _series_terms(d1, d2, du):
+    """``(q' du, q'' du du / 2)`` as elementwise products and sums over the (few) inputs: a
+    ``dot`` under ``vmap`` is lowered by XLA according to the batch size, with a rounding
+    that depends on it, and a stroke's result must not depend on its batch."""
+    first = jnp.sum(d1 * du, axis=-1)
+    second = 0.5 * jnp.sum(d2 * du[:, None] * du[None, :], axis=(-2, -1))
+    return first, second
+
+
 def _trusted_terms(d1, d2, du, s, max_step):
     """``(d1, d2)`` with the terms the Taylor series cannot be trusted with over ``du`` zeroed.
 
@@ -65,8 +74,7 @@ def _trusted_terms(d1, d2, du, s, max_step):
     (scaled max norms: the series is then converging), and a step of more than ``max_step``
     (scaled, as Newton's) is not predicted at all: the anchor itself is the guess.
     """
-    first = d1 @ du
-    second = 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
+    first, second = _series_terms(d1, d2, du)
     size = lambda x: small_max(jnp.abs(x) / s)  # noqa: E731
     keep2 = size(second) <= 0.25 * size(first)
     step = where(keep2, first + second, first)
@@ -79,7 +87,8 @@ def predict(q, d1, d2, du, s, max_step):
     (``q (m,)``, ``d1 (m, dof)``, ``d2 (m, dof, dof)``) over ``du (dof,)``, with the terms
     its series cannot be trusted with dropped.  ``s``: coordinate scales (``solve.coord_scales``)."""
     d1, d2 = _trusted_terms(d1, d2, du, s, max_step)
-    return q + d1 @ du + 0.5 * jnp.einsum("ijk,j,k->i", d2, du, du)
+    first, second = _series_terms(d1, d2, du)
+    return q + first + second
 
 
 # --------------------------------------------------------------------------- one checked step
@@ -186,9 +195,9 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points (inner)."""
         return jax.vmap(lambda p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_blk, *pts))(ps, b0, *args)
 
-    def robust(fields, u_blk, g):
-        """Points that failed the checked step: the full Newton kernel (one ``lax.cond`` per
-        block, so a clean block never runs it)."""
+    def robust(u_blk, g):
+        """The full Newton kernel for every point of a block (run only for a block where the
+        checked step failed somewhere: one ``lax.cond`` per block)."""
 
         def one(u, p_, b_, g_):
             q, st, steps, rn, cond, br = newton(mech, options, u, p_, g_)
@@ -196,11 +205,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
             st = where((st == Status.CONVERGED) & ~on_branch_value(b_, br), Status.BRANCH, st)
             return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
 
-        new = per_block(one, u_blk, g)
-        lean_ok = fields[2] == Status.CONVERGED  # fields: (q_eval, q, status, steps, rn, cond, br)
-        pick = lambda a_, b_: where(lean_ok.reshape(lean_ok.shape + (1,) * (a_.ndim - 2)), a_, b_)  # noqa: E731
-        # the robust kernel's root is also where its derivatives are taken
-        return tuple(pick(a_, b_) for a_, b_ in zip(fields, (new[0],) + new))
+        return per_block(one, u_blk, g)
 
     def derivatives(q, u, ok):
         return jax.vmap(jax.vmap(lambda q_, u_, p_, ok_: root_derivatives(mech, q_, u_, p_, ok_), (0, 0, None, 0)), (0, None, 0, 0))(q, u, ps, ok)
@@ -222,8 +227,20 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         fields = (qf, status, jnp.ones(ok.shape, jnp.int32), rn, cond, br) + with_derivatives(q1, ok)
 
         def fallback(fields):
-            q_eval, qf, status, steps, rn, cond, br = robust(fields[:1] + fields[:6], u_blk, g)
-            return (qf, status, steps, rn, cond, br) + with_derivatives(q_eval, status == Status.CONVERGED)
+            # Points the checked step accepted keep every value it gave (so a point's result
+            # never depends on which other designs share its block); the rest take the
+            # robust kernel's root, with derivatives there.
+            q_r, *rest = robust(u_blk, g)
+            st_r = rest[0]
+            new = (q_r, *rest) + with_derivatives(q_r, st_r == Status.CONVERGED)
+            keep = fields[1] == Status.CONVERGED
+
+            def pick(a_, b_, k_):
+                return None if a_ is None else where(k_.reshape(k_.shape + (1,) * (a_.ndim - k_.ndim)), a_, b_)
+
+            # every field is per point but the last two (the next anchor's derivatives)
+            masks = (keep,) * (len(fields) - 2) + (keep[:, -1],) * 2
+            return tuple(pick(a_, b_, k_) for a_, b_, k_ in zip(fields, new, masks))
 
         qf, status, steps, rn, cond, br, d1, d2, e1, e2 = jax.lax.cond(jnp.any(~ok), fallback, lambda f: f, fields)
         # A failed block end is never an anchor: keep the last trusted pose, and drop its

@@ -149,14 +149,16 @@ class Motion:
         raise KeyError(f"unknown name {name!r}; coordinates {self.coords}, inputs {self.inputs}")
 
 
-def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q):
+def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
+    """Time derivatives of one solved sample from its per-unit-input derivatives."""
     ok = jnp.all(jnp.isfinite(q))
 
     def u_of_t(t_):
         return jnp.reshape(drive(t_), (mech.dof,))
 
     u, ud, udd = time_derivatives(u_of_t, t)
-    d1, d2 = input_derivatives(mech, q, u, p)
+    d1 = jnp.where(ok, d1, 0.0)
+    d2 = jnp.where(ok, d2, 0.0)
     # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
     qd = d1 @ ud
     qdd = d1 @ udd + jnp.einsum("ijk,j,k->i", d2, ud, ud)
@@ -175,23 +177,23 @@ def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p,
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _motion_eval_leaves(mech, point_names, drive_def, drive_leaves, p, t, q):
+def _motion_eval_leaves(mech, point_names, drive_def, drive_leaves, p, t, q, d1, d2):
     drive = jax.tree_util.tree_unflatten(drive_def, drive_leaves)
-    return jax.vmap(lambda t_, q_: _one_sample(mech, point_names, drive, p, t_, q_))(t, q)
+    return jax.vmap(lambda t_, q_, a_, b_: _one_sample(mech, point_names, drive, p, t_, q_, a_, b_))(t, q, d1, d2)
 
 
-def _motion_eval(mech, point_names, drive, p, t, q):
+def _motion_eval(mech, point_names, drive, p, t, q, d1, d2):
     # A drive that is a pytree of arrays is traced (one compile for every speed); a plain
     # function is static (it is hashable), so it recompiles only when the function changes.
     leaves, treedef = jax.tree_util.tree_flatten(drive)
     if all(isinstance(x, (jax.Array, float, int)) or hasattr(x, "dtype") for x in leaves) and leaves:
-        return _motion_eval_leaves(mech, point_names, treedef, [jnp.asarray(x, t.dtype) for x in leaves], p, t, q)
-    return _motion_eval_static(mech, point_names, drive, p, t, q)
+        return _motion_eval_leaves(mech, point_names, treedef, [jnp.asarray(x, t.dtype) for x in leaves], p, t, q, d1, d2)
+    return _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _motion_eval_static(mech, point_names, drive, p, t, q):
-    return jax.vmap(lambda t_, q_: _one_sample(mech, point_names, drive, p, t_, q_))(t, q)
+def _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2):
+    return jax.vmap(lambda t_, q_, a_, b_: _one_sample(mech, point_names, drive, p, t_, q_, a_, b_))(t, q, d1, d2)
 
 
 def motion(
@@ -225,9 +227,10 @@ def motion(
         if n not in mech.points:
             raise ValueError(f"{mech.name}: unknown point {n!r}; defined points: {list(mech.points)}")
     us = jax.vmap(drive)(t)
-    sol: Solution = solve_stroke(mech, us, p, guess, options=options, anchors=anchors)
+    # one compiled pass gives positions and dq/du, d2q/du2; the drive's chain rule follows
+    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, anchors=anchors)
     pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
-    u, ud, udd, q, qd, qdd, d1, d2, pts = _motion_eval(mech, point_names, drive, pj, t.astype(sol.q.dtype), sol.q)
+    u, ud, udd, q, qd, qdd, d1, d2, pts = _motion_eval(mech, point_names, drive, pj, t.astype(sol.q.dtype), sol.q, e1, e2)
     return Motion(
         t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
         points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,

@@ -109,6 +109,16 @@ class Vars(Mapping):
         return f"Vars({self._data!r})"
 
 
+def show_value(v) -> str:
+    """A parameter value as a person writes it: ``-1.0``, ``[1.0, nan]``, never ``np.float64(-1.0)``."""
+    arr = np.asarray(v)
+    if arr.ndim == 0:
+        return repr(arr.item())
+    if arr.size <= 6:
+        return repr(arr.tolist())
+    return f"array of shape {arr.shape}"
+
+
 def _names(value, what: str) -> tuple[str, ...]:
     if isinstance(value, str):
         value = (value,)
@@ -338,9 +348,9 @@ class Mechanism:
             if not np.issubdtype(arr.dtype, np.number):
                 raise ValueError(f"{self.name}: parameter {n!r} must be a number, got {arr.dtype}")
             if not np.all(np.isfinite(arr)):
-                raise ValueError(f"{self.name}: parameter {n!r} must be finite, got {v!r}")
+                raise ValueError(f"{self.name}: parameter {n!r} must be finite, got {show_value(v)}")
             if n in self.lengths and n not in self.signed and np.any(arr <= 0):
                 raise ValueError(
-                    f"{self.name}: length {n!r} must be positive, got {v!r}; "
+                    f"{self.name}: length {n!r} must be positive, got {show_value(v)}; "
                     f"give a positive length in metres"
                 )

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import cond1, small_max, small_norm, solve_small, where
+from ._linalg import cond1, small_max, small_norm, small_tmatmul, solve_small, where
 from .mechanism import Mechanism
 from .status import Status
 
@@ -196,7 +196,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         # One solve: Newton (js dz = r) or LM ((js'js + mu D) dz = js' r), chosen by mu.
         lm = mu > 0
         a = where(lm, jtj + mu * (jtj * eye + 1e-12 * eye), js)
-        b = where(lm, js.T @ r, r)
+        b = where(lm, small_tmatmul(js, r), r)
         dz = solve_small(a, b)
         dz = where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
         size = small_max(jnp.abs(dz))
@@ -225,7 +225,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         crossed = st.crossed | (better & ~on_branch)
         accept = better & on_branch
         q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
-        jtj = js.T @ js
+        jtj = small_tmatmul(js, js)
         mu = where(accept, where(st.mu > 1e-6, st.mu / 10.0, 0.0), jnp.maximum(10.0 * st.mu, 1e-3))
         # Steps refused only for crossing the branch are not lack of progress: the damping
         # is still shortening them towards this branch's root.

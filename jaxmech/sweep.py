@@ -303,7 +303,10 @@ def _run_chunk(scene, points, options, anchors, mode, chunk, params: dict[str, n
     """
     names = tuple(params)
     n = len(next(iter(params.values())))
-    chunk = _round_up(max(chunk, n), jax.device_count())  # a Dask worker may have several devices
+    # A Dask worker may have several devices; and at least two designs per device: XLA
+    # compiles a batch of one as scalar code whose last-bit rounding differs from the
+    # vectorised code (measured), and a design's result must not depend on its chunk.
+    chunk = _round_up(max(chunk, n, 2 * jax.device_count()), jax.device_count())
     compiled, sharding = _compiled(scene, points, options, anchors, mode, chunk, names)
     dtype = jnp.result_type(float)
     padded = {k: np.concatenate([v, np.full(chunk - n, v[0])]).astype(dtype) for k, v in params.items()}

@@ -129,7 +129,41 @@ SYNTAX_ERRORS = {
     "empty grid": (["sweep", "fourbar", "--grid", "a=1:2:0"], "N must be at least 1"),
     "no grid": (["sweep", "fourbar"], "at least one --grid"),
     "bad chunk size": (["sweep", "fourbar", "--grid", "a=1:2:3", "--chunk-size", "0"], "--chunk-size must be at least 1"),
+    # the limit a message states is the limit enforced: 0, -5 and 1 all say "at least 2"
+    "zero points": (["run", "fourbar", "--points", "0"], "--points must be at least 2, got 0"),
+    "negative points": (["sweep", "fourbar", "--grid", "a=1:2:3", "--points", "-5"], "--points must be at least 2, got -5"),
+    "points not a number": (["report", "--points", "many"], "--points must be a whole number"),
 }
+
+
+@pytest.mark.parametrize("verb", [["run", "fourbar"], ["report"], ["animate", "fourbar"], ["sweep", "fourbar", "--grid", "a=1:2:2"]])
+def test_unwritable_destination_fails_before_computing(verb, tmp_path, capsys, monkeypatch):
+    """--out under a file (not a folder) is refused in one line, exit 2, before JAX is set up
+    (``_setup_jax`` is replaced by a trap: reaching it means computing would have started)."""
+    import jaxmech.cli as cli
+
+    def trap():
+        raise AssertionError("the destination was not checked before computing")
+
+    monkeypatch.setattr(cli, "_setup_jax", trap)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file")
+    name = {"animate": "out.gif", "sweep": "out.csv"}.get(verb[0], "out")
+    assert main([*verb, "--out", str(blocker / name)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("jaxmech: error: --out"), err
+    assert "is a file, not a folder" in err[0] and str(blocker) in err[0]
+
+
+def test_parameter_messages_print_plain_numbers():
+    """No numpy repr (``np.float64(-1.0)``) in a message a person reads."""
+    import jaxmech as jm
+    from jaxmech.scenes.classic import fourbar_mechanism as FB
+
+    for bad, shown in [(np.float64(-1.0), "got -1.0"), (np.array([1.0, -2.0]), "got [1.0, -2.0]"), (np.float32(np.nan), "got nan")]:
+        with pytest.raises(ValueError) as e:
+            jm.solve(FB, 0.3, {"a": bad, "b": 3.0, "c": 2.5, "d": 3.5}, np.array([0.5, 1.5]))
+        assert shown in str(e.value) and "np." not in str(e.value) and "array(" not in str(e.value)
 
 
 @pytest.mark.parametrize("case", list(SYNTAX_ERRORS))
