@@ -13,7 +13,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-__all__ = ["where", "UNROLL_MAX", "small_tmatmul", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1"]
+__all__ = ["where", "UNROLL_MAX", "small_tmatmul", "solve_blocks", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1"]
 
 def where(c, x, y):
     """``where(c, x, y)`` written with ``lax.select_n``.
@@ -154,12 +154,37 @@ def solve_small(a, b):
     return _gauss_loop(a, b)
 
 
-def inv_small(a):
-    return solve_small(a, jnp.eye(a.shape[-1], dtype=a.dtype))
+def solve_blocks(a, b, blocks):
+    """Solve ``a x = b`` where ``a`` is block lower triangular after the permutation
+    ``blocks`` (``((rows, cols), ...)`` in solving order, as ``structure.blocks`` gives):
+    one small solve per diagonal block, earlier blocks' unknowns moved to the right-hand
+    side (written out as products, no ``dot``).  ``blocks`` of one block: ``solve_small``."""
+    if len(blocks) == 1:
+        return solve_small(a, b)
+    vec = b.ndim == 1
+    bb = b[:, None] if vec else b
+    x: dict[int, jax.Array] = {}
+    for rows, cols in blocks:
+        rhs = [bb[i] for i in rows]
+        for j, xj in x.items():
+            rhs = [r - a[i, j] * xj for r, i in zip(rhs, rows)]
+        sub = jnp.stack([jnp.stack([a[i, j] for j in cols]) for i in rows])
+        xb = solve_small(sub, jnp.stack(rhs))
+        for t, j in enumerate(cols):
+            x[j] = xb[t]
+    out = jnp.stack([x[j] for j in range(a.shape[-1])])
+    return out[:, 0] if vec else out
 
 
-def cond1(a):
-    """1-norm condition number of a small square matrix (inf where singular)."""
+def inv_small(a, blocks=None):
+    """Inverse of a small matrix (by ``solve_blocks`` when its ``blocks`` are given)."""
+    eye = jnp.eye(a.shape[-1], dtype=a.dtype)
+    return solve_small(a, eye) if blocks is None else solve_blocks(a, eye, blocks)
+
+
+def cond1(a, blocks=None):
+    """1-norm condition number of a small square matrix (inf where singular); ``blocks``:
+    its block-triangular structure, if any (``solve_blocks``)."""
     norm1 = lambda m: small_max(small_sum(jnp.abs(m).T))  # noqa: E731  (max column sum)
-    c = norm1(a) * norm1(inv_small(a))
+    c = norm1(a) * norm1(inv_small(a, blocks))
     return where(jnp.isfinite(c), c, jnp.inf)

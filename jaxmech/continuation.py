@@ -27,9 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import cond1, small_max, small_norm, solve_small, where
+from ._linalg import cond1, small_max, small_norm, solve_blocks, where
 from ._xla import unfused
 from .mechanism import Mechanism
+from .structure import blocks
 from .solve import (
     Solution,
     SolverOptions,
@@ -112,13 +113,14 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
     _, ftol, cond_max = tolerances(opts, dtype)
     evaluate, s = evaluator(mech, u, p, dtype)
     r, js = evaluate(guess)
-    q = guess - solve_small(js, r) * s
+    order = blocks(mech)  # block-triangular solves (structure.py)
+    q = guess - solve_blocks(js, r, order) * s
     finite_q = jnp.all(jnp.isfinite(q))
     q = where(finite_q, q, jnp.zeros_like(q))
     r, js = evaluate(q)
-    dz = solve_small(js, r)
+    dz = solve_blocks(js, r, order)
     rn = small_norm(r)
-    cond = cond1(js)
+    cond = cond1(js, order)
     br = mech.branch_value(q, u, p)
     ok = (small_max(jnp.abs(dz)) <= _lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
     ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch_value(b0, br)

@@ -25,8 +25,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import cond1, small_max, small_norm, small_tmatmul, solve_small, where
+from ._linalg import cond1, small_max, small_norm, small_tmatmul, solve_blocks, solve_small, where
 from .mechanism import Mechanism
+from .structure import blocks
 from .status import Status
 
 __all__ = ["SolverOptions", "Solution", "solve", "solve_one", "newton", "implicit_root", "root_derivatives", "attach_derivatives", "tolerances", "coord_scales", "evaluator"]
@@ -192,12 +193,29 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     m = mech.m
     eye = jnp.eye(m, dtype=dtype)
 
-    def step(r, js, jtj, mu):
-        # One solve: Newton (js dz = r) or LM ((js'js + mu D) dz = js' r), chosen by mu.
+    order = blocks(mech)
+
+    def damped(a, r, mu):
+        # One solve: Newton (a dz = r) or LM ((a'a + mu D) dz = a' r), chosen by mu.
         lm = mu > 0
-        a = where(lm, jtj + mu * (jtj * eye + 1e-12 * eye), js)
-        b = where(lm, small_tmatmul(js, r), r)
-        dz = solve_small(a, b)
+        ata = small_tmatmul(a, a)
+        eye_b = jnp.eye(a.shape[0], dtype=dtype)
+        return solve_small(where(lm, ata + mu * (ata * eye_b + 1e-12 * eye_b), a), where(lm, small_tmatmul(a, r), r))
+
+    def step(r, js, mu):
+        if len(order) == 1:
+            dz = damped(js, r, mu)
+        else:
+            # Block-triangular Jacobian (structure.py): the step block by block, each block's
+            # right-hand side less the earlier blocks' share; with mu = 0 this is the Newton
+            # step exactly, with mu > 0 each block is damped as Levenberg-Marquardt.
+            x: dict = {}
+            for rows, cols in order:
+                rhs = jnp.stack([r[i] - sum((js[i, j] * xj for j, xj in x.items()), jnp.zeros((), dtype)) for i in rows])
+                sub = jnp.stack([jnp.stack([js[i, j] for j in cols]) for i in rows])
+                xb = damped(sub, rhs, mu)
+                x.update({j: xb[t] for t, j in enumerate(cols)})
+            dz = jnp.stack([x[j] for j in range(m)])
         dz = where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
         size = small_max(jnp.abs(dz))
         # Cap the step: far from a root a Newton step can leap onto another branch.
@@ -225,17 +243,16 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         crossed = st.crossed | (better & ~on_branch)
         accept = better & on_branch
         q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
-        jtj = small_tmatmul(js, js)
         mu = where(accept, where(st.mu > 1e-6, st.mu / 10.0, 0.0), jnp.maximum(10.0 * st.mu, 1e-3))
         # Steps refused only for crossing the branch are not lack of progress: the damping
         # is still shortening them towards this branch's root.
         slow = where(accept & (rtn < 0.9 * st.rn), 0, where(better & ~on_branch, st.slow, st.slow + 1))
-        stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(small_max(jnp.diag(jtj)), 1.0))
+        stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(small_max(jnp.sum(js * js, axis=0)), 1.0))
         lift = stalled & st.guard & crossed
         mu = where(lift, 0.0, mu)
         slow = where(lift, 0, slow)
         stalled = stalled & ~lift
-        dz, size = step(r, js, jtj, mu)
+        dz, size = step(r, js, mu)
         converged = (size <= xtol) & (rn <= ftol)
         done = converged | stalled | ~jnp.isfinite(rn)
         return _NewtonState(st.k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled, st.guard & ~lift, crossed)
@@ -251,7 +268,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
 
     converged = (st.size <= xtol) & (st.rn <= ftol)
     q = where(converged, st.q - st.dz * s, st.q)  # the last Newton step is free: it was computed already
-    cond = cond1(st.js)
+    cond = cond1(st.js, blocks(mech))
     finite = inputs_ok & jnp.isfinite(st.rn) & jnp.all(jnp.isfinite(q))
     closed = st.rn <= ftol
     status = where(
@@ -301,7 +318,7 @@ def _implicit_root_jvp(mech, primals, tangents):
     _, rhs = jax.jvp(lambda u_, p_: mech.residual(q_s, u_, p_), (u_s, p_s), (du, dp))
     jac = jax.jacfwd(mech.residual)(q_s, u_s, p_s)
     jac = where(ok, jac, jnp.eye(mech.m, dtype=jac.dtype))
-    dq = -solve_small(jac, rhs)
+    dq = -solve_blocks(jac, rhs, blocks(mech))
     return q, where(ok, dq, jnp.zeros_like(dq))
 
 
@@ -322,7 +339,7 @@ def root_derivatives(mech: Mechanism, q, u, p, ok):
     jq = jax.jacfwd(mech.residual, 0)(q, u, p)
     jq = where(ok, jq, jnp.eye(m, dtype=jq.dtype))
     ju = jax.jacfwd(mech.residual, 1)(q, u, p)
-    d1 = -solve_small(jq, ju)
+    d1 = -solve_blocks(jq, ju, blocks(mech))
     res = lambda q_, u_: mech.residual(q_, u_, p)  # noqa: E731
     eye = jnp.eye(dof, dtype=d1.dtype)
 
@@ -331,7 +348,7 @@ def root_derivatives(mech: Mechanism, q, u, p, ok):
         return jax.jvp(inner, (q, u), (d1[:, j], eye[j]))[1]
 
     hess = jnp.stack([jnp.stack([second(j, k) for k in range(dof)], axis=-1) for j in range(dof)], axis=-2)
-    d2 = -solve_small(jq, hess.reshape(m, dof * dof)).reshape(m, dof, dof)
+    d2 = -solve_blocks(jq, hess.reshape(m, dof * dof), blocks(mech)).reshape(m, dof, dof)
     zero_if = lambda x: where(ok, x, jnp.zeros_like(x))  # noqa: E731
     return zero_if(d1), zero_if(d2)
 

@@ -14,10 +14,6 @@ import pytest  # noqa: E402
 from jaxmech import problems  # noqa: E402
 from jaxmech.scenes import run_scene  # noqa: E402
 
-# Each problem compiles a fit over a whole stroke (minutes on 2 cores): outside the
-# default run, `pytest -m slow` runs them.
-pytestmark = pytest.mark.slow
-
 DEG = np.pi / 180
 TRAVEL_TOL = 1e-6  # rad: the equalities are met by elimination, to Newton's precision
 REL_CLOSED = 1e-9  # the brief's agreement with the gear's closed form
