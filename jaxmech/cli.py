@@ -149,7 +149,7 @@ def _parser() -> _Parser:
     p = _Parser(
         prog=PROG,
         description="Planar mechanisms in JAX: run, plot, animate and sweep the built-in scenes (SI units).",
-        epilog="Compiled kernels are cached in ~/.cache/jaxmech/xla (set JAX_COMPILATION_CACHE_DIR to move it).",
+        epilog="Compiled programs are cached in ~/.cache/jaxmech/xla (JAXMECH_COMPILE_CACHE=DIR moves it, =0 turns it off).",
     )
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
 

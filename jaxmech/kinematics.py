@@ -31,6 +31,7 @@ __all__ = [
     "time_derivatives",
     "motion",
     "stroke_kinematics",
+    "sample_kinematics",
 ]
 
 
@@ -149,19 +150,18 @@ class Motion:
         raise KeyError(f"unknown name {name!r}; coordinates {self.coords}, inputs {self.inputs}")
 
 
-def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
-    """Time derivatives of one solved sample from its per-unit-input derivatives."""
-    ok = jnp.all(jnp.isfinite(q))
-
-    def u_of_t(t_):
-        return jnp.reshape(drive(t_), (mech.dof,))
-
-    u, ud, udd = time_derivatives(u_of_t, t)
-    d1 = jnp.where(ok, d1, 0.0)
-    d2 = jnp.where(ok, d2, 0.0)
-    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
-    qd = d1 @ ud
-    qdd = d1 @ udd + jnp.einsum("ijk,j,k->i", d2, ud, ud)
+def sample_kinematics(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
+    """Kinematics at one solved sample from its per-unit-input derivatives ``d1 = dq/du``,
+    ``d2 = d2q/du2`` (as ``stroke_kinematics`` gives them): ``(u, u_dot, u_ddot, q_dot,
+    q_ddot, points)`` with ``points = {name: (pos, vel, acc)}``.  Finite wherever ``q``,
+    ``d1`` and ``d2`` are (give placeholders at failed samples and mask afterwards): the one
+    evaluation that ``motion``, sweeps and design share.
+    """
+    u, ud, udd = time_derivatives(lambda t_: jnp.reshape(drive(t_), (mech.dof,)), t)
+    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot] (sums over the few
+    # inputs written out: a dot's rounding under vmap depends on the batch size)
+    qd = jnp.sum(d1 * ud, axis=-1)
+    qdd = jnp.sum(d1 * udd, axis=-1) + jnp.sum(d2 * ud[:, None] * ud[None, :], axis=(-2, -1))
     # Points need no further implicit derivatives: along the exact second-order path
     # (q + qd s + qdd s^2/2, u + ud s + udd s^2/2) their first two s-derivatives at s = 0
     # are the true velocity and acceleration.
@@ -172,6 +172,16 @@ def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p,
             return mech.point(name, q + qd * s_ + 0.5 * qdd * s_**2, u + ud * s_ + 0.5 * udd * s_**2, p)
 
         pts[name] = time_derivatives(along, jnp.zeros_like(t))
+    return u, ud, udd, qd, qdd, pts
+
+
+def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
+    """``sample_kinematics`` with NaN wherever the sample failed (NaN positions)."""
+    ok = jnp.all(jnp.isfinite(q))
+    qs = jnp.where(ok, q, 0.0)
+    d1 = jnp.where(ok, d1, 0.0)
+    d2 = jnp.where(ok, d2, 0.0)
+    u, ud, udd, qd, qdd, pts = sample_kinematics(mech, point_names, drive, p, t, qs, d1, d2)
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
     return (u, ud, udd, q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
 

@@ -27,10 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .kinematics import ConstantSpeed, Motion, time_derivatives
+from .continuation import stroke
+from .kinematics import ConstantSpeed, Motion, sample_kinematics
 from .scenes.base import Scene
-from .continuation import solve_stroke
-from .solve import SolverOptions, implicit_root
+from .solve import SolverOptions
 from .status import Status, status_counts
 
 __all__ = ["SweepResult", "grid", "random_designs", "sweep_scene"]
@@ -120,31 +120,6 @@ def _stroke_drive(scene: Scene, p, dtype):
     return ConstantSpeed(u0, w), (u1 - u0) / w
 
 
-def _sample(mech, drive, p, t, q, ok):
-    """Kinematics at one solved sample; ``q`` must be finite (a placeholder where not ``ok``).
-
-    The same formulas as ``kinematics.motion`` (chain rule from ``dq/du``, ``d2q/du2``;
-    points along the exact second-order path), but the implicit root is attached with the
-    solve's own ``ok``: a failed sample has exactly zero derivatives and no NaN anywhere
-    (its values are replaced by NaN afterwards, outside every derivative).
-    """
-    root = lambda u: implicit_root(mech, q, ok, u, p)  # noqa: E731
-    u, ud, udd = time_derivatives(lambda t_: jnp.reshape(drive(t_), (mech.dof,)), t)
-    d1 = jax.jacfwd(root)(u)
-    d2 = jax.jacfwd(jax.jacfwd(root))(u)
-    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
-    qd = d1 @ ud
-    qdd = d1 @ udd + jnp.einsum("ijk,j,k->i", d2, ud, ud)
-    pts = {}
-    for name in mech.points:
-
-        def along(s_, name=name):
-            return mech.point(name, q + qd * s_ + 0.5 * qdd * s_**2, u + ud * s_ + 0.5 * udd * s_**2, p)
-
-        pts[name] = time_derivatives(along, jnp.zeros_like(t))
-    return u, ud, udd, qd, qdd, d1, d2, pts
-
-
 def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
     """One design's ``Motion`` over its stroke, traceable (works under ``jit``/``vmap``/``grad``).
 
@@ -168,11 +143,15 @@ def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = Solv
     t = jnp.linspace(0.0, duration, points)
     us = jax.vmap(drive)(t)
     guess = jnp.asarray(scene.guess(p), dtype)
-    sol = solve_stroke(mech, us, p, guess, options=options, anchors=anchors)
+    # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
+    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, anchors=anchors)
     ok = sol.status == Status.CONVERGED
-    # Mask the *inputs* of everything downstream: no NaN, not even in a branch not taken.
+    # Mask the *inputs* of everything downstream: no NaN, not even in a branch not taken
+    # (failed samples have zero derivatives).
     q = jnp.where(ok[:, None], sol.q, guess[None, :])
-    u, ud, udd, qd, qdd, d1, d2, pts = jax.vmap(lambda t_, q_, ok_: _sample(mech, drive, p, t_, q_, ok_))(t, q, ok)
+    d1 = jnp.where(ok[:, None, None], e1, 0.0)
+    d2 = jnp.where(ok[:, None, None, None], e2, 0.0)
+    u, ud, udd, qd, qdd, pts = jax.vmap(lambda t_, q_, a_, b_: sample_kinematics(mech, tuple(mech.points), drive, p, t_, q_, a_, b_))(t, q, d1, d2)
     mo = Motion(
         t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
         points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,
