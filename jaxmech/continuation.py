@@ -184,12 +184,13 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
 
     def guesses(q_a, d1_a, d2_a, u_a, b_, p_, s_, u_blk):
-        """One design's block of guesses ``(k, m)`` from its anchor's guarded predictor."""
+        """One design's block of guesses ``(k, m)`` from its anchor's guarded predictor; the
+        series is checked once, over the block's farthest point (its last)."""
+        d1_t, d2_t = _trusted_terms(d1_a, d2_a, u_blk[-1] - u_a, s_, options.max_step)
 
         def one(u):
-            g = predict(q_a, d1_a, d2_a, u - u_a, s_, options.max_step)
-            # a predictor off the stroke's branch: start at the anchor itself
-            return where(on_branch_value(b_, mech.branch_value(g, u, p_)), g, q_a)
+            first, second = _series_terms(d1_t, d2_t, u - u_a)
+            return q_a + first + second
 
         return jax.vmap(one)(u_blk)
 
@@ -197,17 +198,20 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points (inner)."""
         return jax.vmap(lambda p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_blk, *pts))(ps, b0, *args)
 
-    def robust(u_blk, g):
+    def robust(u_blk, g, q_a):
         """The full Newton kernel for every point of a block (run only for a block where the
         checked step failed somewhere: one ``lax.cond`` per block)."""
 
-        def one(u, p_, b_, g_):
+        def one(u, p_, b_, g_, q_a):
+            # a predictor off the stroke's branch: start at the anchor itself (the checked
+            # step needs no such test: it checks the branch of its result)
+            g_ = where(on_branch_value(b_, mech.branch_value(g_, u, p_)), g_, q_a)
             q, st, steps, rn, cond, br = newton(mech, options, u, p_, g_)
             # converged, but on another branch than the stroke's: BRANCH
             st = where((st == Status.CONVERGED) & ~on_branch_value(b_, br), Status.BRANCH, st)
             return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
 
-        return per_block(one, u_blk, g)
+        return per_block(one, u_blk, g, jnp.broadcast_to(q_a[:, None], g.shape))
 
     def derivatives(q, u, ok):
         return jax.vmap(jax.vmap(lambda q_, u_, p_, ok_: root_derivatives(mech, q_, u_, p_, ok_), (0, 0, None, 0)), (0, None, 0, 0))(q, u, ps, ok)
@@ -232,7 +236,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
             # Points the checked step accepted keep every value it gave (so a point's result
             # never depends on which other designs share its block); the rest take the
             # robust kernel's root, with derivatives there.
-            q_r, *rest = robust(u_blk, g)
+            q_r, *rest = robust(u_blk, g, q_a)
             st_r = rest[0]
             new = (q_r, *rest) + with_derivatives(q_r, st_r == Status.CONVERGED)
             keep = fields[1] == Status.CONVERGED
