@@ -51,7 +51,7 @@ from .actuators import DCMotor, Spec, resolve
 from .kinematics import time_derivatives
 from .mechanism import Mechanism, Vars
 from ._linalg import cond1, solve_small
-from .continuation import solve_stroke
+from .continuation import stroke
 from .solve import SolverOptions, as_coords, as_inputs, implicit_root, solve, solve_one, tolerances
 from .status import Status
 
@@ -323,11 +323,22 @@ def _safe(model: Model, q, u, p):
     return ok, jnp.where(ok, q, jnp.zeros_like(q))
 
 
-def _path(model: Model, q, ok, u, ud, udd, p):
+def _path(model: Model, q, ok, u, ud, udd, p, qd=None, qdd=None):
     """``s -> (q(s), u(s))`` along ``u(s) = u + ud s + udd s^2/2``, differentiable via the
     implicit function theorem: its first and second ``s``-derivatives at 0 are the actual
-    velocities and accelerations."""
+    velocities and accelerations.  With the coordinates' own ``qd`` and ``qdd`` known (a
+    stroke's chain rule gives them) the path is ``q + qd s + qdd s^2/2``: the same first
+    and second derivatives, without differentiating the implicit root twice again."""
     mech = model.mechanism
+
+    if qd is not None:
+        qd = jnp.where(ok, qd, 0.0)
+        qdd = jnp.where(ok, qdd, 0.0)
+
+        def path(s):
+            return q + qd * s + 0.5 * qdd * s * s, u + ud * s + 0.5 * udd * s * s
+
+        return path
 
     def path(s):
         us = u + ud * s + 0.5 * udd * s * s
@@ -336,7 +347,7 @@ def _path(model: Model, q, ok, u, ud, udd, p):
     return path
 
 
-def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool = True):
+def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool = True, q_dot=None, q_ddot=None):
     """Driving generalized forces and constraint multipliers at one solved state.
 
     **Arguments**
@@ -345,6 +356,10 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
       input position, velocity, acceleration ``(dof,)``; `p`: parameter mapping; `t`: s.
     - `inertia`: False for the quasi-static balance (inertia left out; velocity-dependent
       loads still see `u_dot`).
+    - `q_dot`, `q_ddot`: the coordinates' velocities and accelerations ``(m,)`` when known
+      (``motion`` and ``stroke_kinematics`` give them); otherwise they are taken from ``q``
+      by the implicit function theorem.  Either way the results are differentiable in
+      every parameter.
 
     **Returns** ``(tau (dof,), lam (m,))``: `tau` the force/torque (N or N m) that the
     drive must apply *on* each input (positive in the input's positive sense) to produce
@@ -355,7 +370,7 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     p = dict(p)
     ok, q = _safe(model, q, u, p)
     dtype = q.dtype
-    path = _path(model, q, ok, u, u_dot, u_ddot, p)
+    path = _path(model, q, ok, u, u_dot, u_ddot, p, q_dot, q_ddot)
     pv = Vars(p)
     geo = lambda s: _geometry(model, *path(s), p)  # noqa: E731
     if inertia:
@@ -537,21 +552,24 @@ def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=
                            tau=r(tau), reactions=r(lam), status=r(status))
 
 
-def _id_drive_one(model, quasi_static, drive, p, t_, q_):
+def _id_drive_one(model, quasi_static, drive, p, t_, q_, d1, d2):
     u, ud, udd = time_derivatives(lambda s: jnp.reshape(drive(s), (model.mechanism.dof,)), t_)
-    tau, lam = generalized_forces(model, q_, u, ud, udd, p, t_, inertia=not quasi_static)
+    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
+    qd = jnp.sum(d1 * ud, axis=-1)
+    qdd = jnp.sum(d1 * udd, axis=-1) + jnp.sum(d2 * ud[:, None] * ud[None, :], axis=(-2, -1))
+    tau, lam = generalized_forces(model, q_, u, ud, udd, p, t_, inertia=not quasi_static, q_dot=qd, q_ddot=qdd)
     return u, ud, udd, tau, lam
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _id_drive_leaves(model, quasi_static, drive_def, drive_leaves, p, t, q):
+def _id_drive_leaves(model, quasi_static, drive_def, drive_leaves, p, t, q, d1, d2):
     drive = jax.tree_util.tree_unflatten(drive_def, drive_leaves)
-    return jax.vmap(lambda t_, q_: _id_drive_one(model, quasi_static, drive, p, t_, q_))(t, q)
+    return jax.vmap(lambda *a: _id_drive_one(model, quasi_static, drive, p, *a))(t, q, d1, d2)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _id_drive_static(model, quasi_static, drive, p, t, q):
-    return jax.vmap(lambda t_, q_: _id_drive_one(model, quasi_static, drive, p, t_, q_))(t, q)
+def _id_drive_static(model, quasi_static, drive, p, t, q, d1, d2):
+    return jax.vmap(lambda *a: _id_drive_one(model, quasi_static, drive, p, *a))(t, q, d1, d2)
 
 
 def inverse_dynamics(model: Model, drive, t, p: Mapping, guess, *, quasi_static: bool = False,
@@ -575,16 +593,17 @@ def inverse_dynamics(model: Model, drive, t, p: Mapping, guess, *, quasi_static:
     if t.ndim != 1:
         raise ValueError(f"t must be a 1-D array of times, got shape {t.shape}")
     us = jax.vmap(drive)(t)
-    sol = solve_stroke(model.mechanism, us, p, guess, options=options, anchors=anchors)
+    # positions, dq/du and d2q/du2 in one compiled pass; the drive's chain rule gives the rates
+    sol, d1, d2 = stroke(model.mechanism, us, p, guess, options, derivs=True, anchors=anchors)
     dtype = sol.q.dtype
     pj = _prep_p(model, p, dtype)
     tt = t.astype(dtype)
     leaves, treedef = jax.tree_util.tree_flatten(drive)
     # A pytree drive is traced (one compile for every speed); a plain function is static.
     if leaves and all(hasattr(x, "dtype") or isinstance(x, (int, float)) for x in leaves):
-        res = _id_drive_leaves(model, bool(quasi_static), treedef, [jnp.asarray(x, dtype) for x in leaves], pj, tt, sol.q)
+        res = _id_drive_leaves(model, bool(quasi_static), treedef, [jnp.asarray(x, dtype) for x in leaves], pj, tt, sol.q, d1, d2)
     else:
-        res = _id_drive_static(model, bool(quasi_static), drive, pj, tt, sol.q)
+        res = _id_drive_static(model, bool(quasi_static), drive, pj, tt, sol.q, d1, d2)
     u, ud, udd, tau, lam = res
     return InverseDynamics(t=t, u=u, u_dot=ud, u_ddot=udd, q=sol.q, tau=tau, reactions=lam, status=sol.status)
 

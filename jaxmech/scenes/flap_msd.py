@@ -294,8 +294,14 @@ MOTOR = DCMotor(resistance="R_a", constant="K_m")
 
 
 @jax.jit
-def _torque_batch(p, q, u, ud, udd, t):
-    return jax.vmap(lambda *a: generalized_forces(MODEL, *a[:4], p, a[4])[0][0])(q, u, ud, udd, t)
+def _torque_batch(p, q, u, ud, udd, t, d1, d2):
+    def one(q_, u_, ud_, udd_, t_, d1_, d2_):
+        # the coordinates' rates by the chain rule from dq/du, d2q/du2 and this drive
+        qd = jnp.sum(d1_ * ud_, axis=-1)
+        qdd = jnp.sum(d1_ * udd_, axis=-1) + jnp.sum(d2_ * ud_[:, None] * ud_[None, :], axis=(-2, -1))
+        return generalized_forces(MODEL, q_, u_, ud_, udd_, p, t_, q_dot=qd, q_ddot=qdd)[0][0]
+
+    return jax.vmap(one)(q, u, ud, udd, t, d1, d2)
 
 
 def torque(p: Mapping, motion: Motion):
@@ -308,7 +314,7 @@ def torque(p: Mapping, motion: Motion):
     """
     dt = motion.q.dtype
     pj = {k: jnp.asarray(v, dt) for k, v in p.items()}
-    return _torque_batch(pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt))
+    return _torque_batch(pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt), motion.dq_du, motion.d2q_du2)
 
 
 def voltage(p: Mapping, motion: Motion, torque_values=None):
