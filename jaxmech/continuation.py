@@ -309,7 +309,8 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
         if traced:
             out = jax.tree_util.tree_map(lambda x: jax.lax.slice_in_dim(x, 0, n, axis=axis), out)
         else:
-            out = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x).take(np.arange(n), axis=axis)), out)
+            # jax.device_put, not jnp.asarray: the latter compiles a small staging program per shape
+            out = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x).take(np.arange(n), axis=axis)), out)
     q, status, steps, rn, cond, br, d1, d2 = out
     sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, coords=mech.coords)
     return sol, d1, d2

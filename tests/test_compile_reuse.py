@@ -1,0 +1,81 @@
+"""Compiled code is reused when nothing structural changed (an identical mechanism rebuilt,
+a stroke one point longer), and the persistent compilation cache follows its switches."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxmech as jm  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+P = dict(a=1.0, b=3.0, c=2.5, d=3.5)
+
+
+def fourbar(c_scale=1.0):
+    return jm.Mechanism(
+        coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+        constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - c_scale * p.c * jm.cis(q.theta4) - p.d],
+        branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+    )  # fmt: skip
+
+
+class CompileCounter:
+    """Counts XLA compiles through jax.monitoring while active."""
+
+    def __init__(self):
+        self.n = 0
+        self.on = False
+        jax.monitoring.register_event_duration_secs_listener(self._listen)
+
+    def _listen(self, event, duration, **kw):
+        if self.on and event == "/jax/core/compile/backend_compile_duration":
+            self.n += 1
+
+
+COUNTER = CompileCounter()
+
+
+def test_identical_mechanisms_are_equal_and_share_compiled_code():
+    a, b, other = fourbar(), fourbar(), fourbar(c_scale=2.0)
+    assert a == b and hash(a) == hash(b)
+    assert a != other  # a different constant inside the equations is a different program
+    us = np.linspace(0.0, 2 * np.pi, 361)
+    first = jm.stroke_kinematics(a, us, P, np.array([0.4, 1.7]))
+    COUNTER.n, COUNTER.on = 0, True
+    try:
+        again = jm.stroke_kinematics(b, us, P, np.array([0.4, 1.7]))
+        longer = jm.stroke_kinematics(b, np.linspace(0.0, 2 * np.pi, 362), P, np.array([0.4, 1.7]))
+    finally:
+        COUNTER.on = False
+    assert COUNTER.n == 0, f"{COUNTER.n} programs compiled for a rebuilt mechanism and a stroke one point longer"
+    np.testing.assert_array_equal(np.asarray(again[0].q), np.asarray(first[0].q))
+    assert longer[0].q.shape == (362, 2) and np.all(np.asarray(longer[0].ok))
+    # both strokes end at the same crank angle (a full turn): the same pose
+    np.testing.assert_allclose(np.asarray(longer[0].q[-1]), np.asarray(first[0].q[-1]), atol=1e-12)
+
+
+def _cache_dir_seen(env):
+    code = "import jax, jaxmech; print(jax.config.jax_compilation_cache_dir)"
+    env = {k: v for k, v in {**os.environ, **env}.items() if v is not None}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip()
+
+
+def test_persistent_cache_switches(tmp_path):
+    base = {"JAX_COMPILATION_CACHE_DIR": None, "PYTHONPATH": str(ROOT)}
+    assert _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": "0"}) == "None"
+    assert _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": str(tmp_path / "here")}) == str(tmp_path / "here")
+    assert (tmp_path / "here").is_dir()
+    theirs = str(tmp_path / "theirs")
+    assert _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": None, "JAX_COMPILATION_CACHE_DIR": theirs}) == theirs
+    home = _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": None, "XDG_CACHE_HOME": str(tmp_path / "xdg")})
+    assert home == str(tmp_path / "xdg" / "jaxmech" / "xla")
