@@ -484,8 +484,32 @@ def plot(result, path):
     plt.close(fig)
 
 
+def run_core(n: int = 10**6, rounds: int = 3) -> dict:
+    """jaxmech against the jitted closed form alone at ``n`` positions, alternating, ``rounds``
+    times: the steady-state ratio without the peers (no ``.[bench]`` extras needed)."""
+    setup_jax(True)
+    jax, jnp, jm, mech, closed_jax, jaxmech_one, _ = _jax_methods()
+    p = {k: jnp.asarray(v) for k, v in DESIGN.items()}
+    g = jnp.asarray(GUESS)
+    us = jnp.asarray(np.linspace(0.0, 2 * np.pi, n, endpoint=False))
+    fc, ctc = compile_jax(closed_jax, us, p)
+    fj, ctj = compile_jax(jaxmech_one, us, p, g)
+    rounds_out = []
+    for _ in range(rounds):
+        tc = time_call(fc, us, p, repeat=5)["median_s"]
+        tj = time_call(fj, us, p, g, repeat=5)["median_s"]
+        rounds_out.append({"closed_jax_ns": tc / n * 1e9, "jaxmech_ns": tj / n * 1e9, "ratio": tj / tc})
+        print(f"closed form {tc / n * 1e9:6.0f} ns/pos   jaxmech {tj / n * 1e9:6.0f} ns/pos   ratio {tj / tc:.2f}", flush=True)
+    return {"n_positions": n, "compile_s": {"closed_jax": ctc, "jaxmech": ctj}, "rounds": rounds_out}
+
+
 def main(argv=None):
-    args = base_parser(__doc__.splitlines()[0]).parse_args(argv)
+    parser = base_parser(__doc__.splitlines()[0])
+    parser.add_argument("--core", action="store_true", help="only jaxmech against the jitted closed form at 1e6 positions")
+    args = parser.parse_args(argv)
+    if args.core:
+        print("wrote", write_result("kinematics_core", run_core(), out_dir=args.out))
+        return
     res = run(args.quick)
     path = write_result("kinematics", res, out_dir=args.out)
     plot(res, args.out / "kinematics.png")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -225,6 +226,7 @@ def run_case(case: str, cache: Path) -> dict:
             row["error"] = text[-2000:]
         if dump is not None:
             row["hlo_lines"] = _hlo_sizes(dump)
+            shutil.rmtree(dump, ignore_errors=True)
         out[label] = row
     return out
 
