@@ -576,7 +576,7 @@ def scene_for(scenario: str = "cruise") -> Scene:
         outputs=_outputs,
         validate=validate,
         drawing=_drawing,
-        document="docs/seeds/arc_track_flap.md (seed /work/shared/seeds/003_7443f8f08b2c3632.txt)",
+        document="G. Arslan, 'Development of kinetostatic design methodology for airplane flap mechanisms', MSc thesis, İzmir Institute of Technology, December 2022; corrections in docs/seeds/arc_track_flap.md",
     )
 
 

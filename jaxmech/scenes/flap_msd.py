@@ -489,5 +489,5 @@ SCENE = Scene(
     outputs=_outputs,
     validate=_validate,
     drawing=_drawing,
-    document="/work/shared/seeds/000_0e5ea70f9886b82a.txt; corrections in docs/seeds/flap_msd.md",
+    document="A. Carnevali, A. Fernandez, G. Landa, 'MSD Project: flap extraction and retraction system', Group 6 project report, Multibody System Dynamics (Prof. P. Masarati), Politecnico di Milano, A.Y. 2022/23; corrections in docs/seeds/flap_msd.md",
 )

@@ -384,5 +384,5 @@ SCENE = Scene(
     outputs=_outputs,
     validate=_validate,
     drawing=_drawing,
-    document="/work/shared/seeds/001_2d20636cf4490e47.txt; corrections in docs/seeds/landing_gear.md",
+    document="A. Z. Creppe, 'SEM0501 - Dinâmica Aplicada às Máquinas, Trabalho 1 - Projeto de Mecanismo' (Prof. M. A. Trindade), student report, June 2021; corrections in docs/seeds/landing_gear.md",
 )

@@ -552,7 +552,7 @@ def _scene(n, name, summary):
         outputs=_outputs,
         validate=_validate,
         drawing=_drawing,
-        document="/work/shared/seeds/004_52c3b6aed7b0817f.txt; corrections in docs/seeds/sma_flap.md",
+        document="P. B. Camara Leal, 'Dynamic modelling of sma-driven flap', note, February 19, 2016; corrections in docs/seeds/sma_flap.md",
     )
 
 

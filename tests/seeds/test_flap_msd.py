@@ -1,7 +1,8 @@
 """The MSD double-flap scene (seed 000_0e5ea70f9886b82a) against the independent numpy/scipy
 reference ``reference_flap_msd`` and the numbers of ``docs/seeds/flap_msd.md``.
 
-Section and equation numbers refer to the report (/work/shared/seeds/000_0e5ea70f9886b82a.txt).
+Section and equation numbers refer to the report (Carnevali, Fernandez, Landa,
+"MSD Project: flap extraction and retraction system", Politecnico di Milano, 2022/23).
 Every test reuses one ``run_scene(SCENE, 46)`` (1 deg steps); the other calls have the same
 shapes, so nothing else is compiled but the bordered toggle Newton.
 """

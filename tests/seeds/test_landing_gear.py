@@ -2,7 +2,7 @@
 reference ``reference_landing_gear`` and the numbers of ``docs/seeds/landing_gear.md``.
 
 Section, equation and listing numbers refer to the report
-(/work/shared/seeds/001_2d20636cf4490e47.txt).  The report works in feet; the scene is SI and
+(A. Z. Creppe, SEM0501 "Projeto de Mecanismo", 2021).  The report works in feet; the scene is SI and
 the tests convert with ``FT`` = 0.3048 m/ft.
 """
 

@@ -1,7 +1,8 @@
 """The SMA-actuated hinged flap (seed 004_52c3b6aed7b0817f) against the independent numpy/scipy
 reference ``reference_sma_flap`` and the numbers of ``docs/seeds/sma_flap.md``.
 
-Section and equation numbers refer to the note (/work/shared/seeds/004_52c3b6aed7b0817f.txt).
+Section and equation numbers refer to the note (P. B. Camara Leal, "Dynamic modelling of
+sma-driven flap", 2016).
 The note gives no numbers.  The parameter set is the analysis's (docs/seeds/sma_flap.md), and
 truth is the reference's brentq bracketing, or its plain Newton where a nested brentq over two
 hinges would cost seconds.  The reference's ``__main__`` is slow, so only the functions needed
