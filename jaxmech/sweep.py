@@ -203,9 +203,23 @@ def _mask_columns(scene, cols, status, xp):
 
 
 # =========================================================================== the kernel
+# Column order as the scene writes it (run_scene's order), recorded when the kernel is
+# traced: a compiled program returns its dict outputs with their keys sorted.
+_COLUMN_ORDER: dict = {}
+
+
+def _in_scene_order(scene: Scene, cols: dict) -> dict:
+    """``cols`` in the order ``run_scene``'s table has them (sorted back, where known)."""
+    order = _COLUMN_ORDER.get(scene.name)
+    if not order or set(order) != set(cols):
+        return cols
+    return {k: cols[k] for k in order}
+
+
 def _kernel_full(scene, points, options, anchors, p):
     def one(p1):
         cols, status = design_columns(scene, points, p1, options=options, anchors=anchors)
+        _COLUMN_ORDER[scene.name] = list(cols)
         return _mask_columns(scene, cols, status, jnp), status
 
     return jax.vmap(one)(p)
@@ -619,7 +633,7 @@ def sweep_scene(
     errors.update({i: m for i, m in chunk_errors.items() if i not in errors})
     info["seconds"] = time.perf_counter() - t0
     return SweepResult(
-        scene=scene.name, params=params, columns=cols, status=status, errors=dict(sorted(errors.items())), info=info
+        scene=scene.name, params=params, columns=_in_scene_order(scene, cols), status=status, errors=dict(sorted(errors.items())), info=info
     )
 
 

@@ -198,3 +198,15 @@ def test_dask_cluster_gives_identical_results(fourbar_grid):
     for k in fourbar_grid.columns:
         _assert_same(r.columns[k], fourbar_grid.columns[k], TABLE_RTOL)
     np.testing.assert_array_equal(r.status, fourbar_grid.status)
+
+
+def test_sweep_columns_in_the_order_run_scene_writes_them(fourbar_grid, tmp_path):
+    """One column order everywhere: the sweep's columns and CSV header follow run_scene's
+    table (theta2_dot before theta2_ddot), not the sorted order of a compiled program."""
+    from jaxmech.scenes import run_scene
+
+    table = [k for k in run_scene(FOURBAR, POINTS).table() if k != "status[-]"]
+    assert list(fourbar_grid.columns) == table
+    fourbar_grid.to_csv(tmp_path / "s.csv")
+    head = (tmp_path / "s.csv").read_text().splitlines()[0].split(",")
+    assert head[2 + len(fourbar_grid.params):-1] == table
