@@ -154,7 +154,6 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     """
     stop = jax.lax.stop_gradient
     n, dof = us.shape
-    n_out = n
     m = mech.m
     d = guess.shape[0]
     dtype = guess.dtype
@@ -260,15 +259,15 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), jnp.broadcast_to(us_s[0], (d, dof)))
     _, out = jax.lax.scan(scan_fn, init, blocks)
     # (nblk + 1, D, k, ...) -> (D, n, ...): point 0 is block 0's last entry
-    out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n_out], out)
+    out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n], out)
     q, status, steps, rn, cond, br, d1, d2 = out
-    inputs_ok = p_fin[:, None] & us_fin[None, :n_out] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
+    inputs_ok = p_fin[:, None] & us_fin[None, :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
     status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
     ok = status == Status.CONVERGED
     q_star = where(ok[..., None], q, jnp.nan)
 
     # Attach the roots to (u, p): derivatives by the implicit function theorem.
-    u_out = us_s[:n_out]
+    u_out = us_s[:n]
     q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, None, 0))(q_star, ok, u_out, p)
     if derivs:
         d1 = where(ok[..., None, None], d1, jnp.nan)

@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .actuators import DCMotor, Spec, resolve
-from .kinematics import time_derivatives
+from .kinematics import chain_rule, time_derivatives
 from .mechanism import Mechanism, Vars
 from ._linalg import cond1, solve_small
 from .continuation import stroke
@@ -554,9 +554,7 @@ def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=
 
 def _id_drive_one(model, quasi_static, drive, p, t_, q_, d1, d2):
     u, ud, udd = time_derivatives(lambda s: jnp.reshape(drive(s), (model.mechanism.dof,)), t_)
-    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot]
-    qd = jnp.sum(d1 * ud, axis=-1)
-    qdd = jnp.sum(d1 * udd, axis=-1) + jnp.sum(d2 * ud[:, None] * ud[None, :], axis=(-2, -1))
+    qd, qdd = chain_rule(d1, d2, ud, udd)
     tau, lam = generalized_forces(model, q_, u, ud, udd, p, t_, inertia=not quasi_static, q_dot=qd, q_ddot=qdd)
     return u, ud, udd, tau, lam
 

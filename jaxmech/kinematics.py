@@ -32,6 +32,7 @@ __all__ = [
     "motion",
     "stroke_kinematics",
     "sample_kinematics",
+    "chain_rule",
 ]
 
 
@@ -150,6 +151,16 @@ class Motion:
         raise KeyError(f"unknown name {name!r}; coordinates {self.coords}, inputs {self.inputs}")
 
 
+def chain_rule(d1, d2, u_dot, u_ddot):
+    """Coordinate rates of one sample from its per-unit-input derivatives:
+    ``q_dot = q' u_dot``, ``q_ddot = q' u_ddot + q''[u_dot, u_dot]`` (``d1 (m, dof)``,
+    ``d2 (m, dof, dof)``).  The sums over the few inputs are written out: a ``dot``'s
+    rounding under ``vmap`` depends on the batch size."""
+    qd = jnp.sum(d1 * u_dot, axis=-1)
+    qdd = jnp.sum(d1 * u_ddot, axis=-1) + jnp.sum(d2 * u_dot[:, None] * u_dot[None, :], axis=(-2, -1))
+    return qd, qdd
+
+
 def sample_kinematics(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
     """Kinematics at one solved sample from its per-unit-input derivatives ``d1 = dq/du``,
     ``d2 = d2q/du2`` (as ``stroke_kinematics`` gives them): ``(u, u_dot, u_ddot, q_dot,
@@ -158,10 +169,7 @@ def sample_kinematics(mech: Mechanism, point_names: Sequence[str], drive: Callab
     evaluation that ``motion``, sweeps and design share.
     """
     u, ud, udd = time_derivatives(lambda t_: jnp.reshape(drive(t_), (mech.dof,)), t)
-    # chain rule: q_dot = q' u_dot, q_ddot = q' u_ddot + q''[u_dot, u_dot] (sums over the few
-    # inputs written out: a dot's rounding under vmap depends on the batch size)
-    qd = jnp.sum(d1 * ud, axis=-1)
-    qdd = jnp.sum(d1 * udd, axis=-1) + jnp.sum(d2 * ud[:, None] * ud[None, :], axis=(-2, -1))
+    qd, qdd = chain_rule(d1, d2, ud, udd)
     # Points need no further implicit derivatives: along the exact second-order path
     # (q + qd s + qdd s^2/2, u + ud s + udd s^2/2) their first two s-derivatives at s = 0
     # are the true velocity and acceleration.

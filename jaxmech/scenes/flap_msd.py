@@ -65,7 +65,7 @@ import numpy as np
 
 from ..actuators import DCMotor
 from ..dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
-from ..kinematics import Motion
+from ..kinematics import Motion, chain_rule
 from ..mechanism import Mechanism, cis
 from ..continuation import solve_stroke
 from ..status import Status
@@ -296,9 +296,7 @@ MOTOR = DCMotor(resistance="R_a", constant="K_m")
 @jax.jit
 def _torque_batch(p, q, u, ud, udd, t, d1, d2):
     def one(q_, u_, ud_, udd_, t_, d1_, d2_):
-        # the coordinates' rates by the chain rule from dq/du, d2q/du2 and this drive
-        qd = jnp.sum(d1_ * ud_, axis=-1)
-        qdd = jnp.sum(d1_ * udd_, axis=-1) + jnp.sum(d2_ * ud_[:, None] * ud_[None, :], axis=(-2, -1))
+        qd, qdd = chain_rule(d1_, d2_, ud_, udd_)  # this drive's rates from dq/du, d2q/du2
         return generalized_forces(MODEL, q_, u_, ud_, udd_, p, t_, q_dot=qd, q_ddot=qdd)[0][0]
 
     return jax.vmap(one)(q, u, ud, udd, t, d1, d2)
