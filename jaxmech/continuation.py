@@ -38,6 +38,8 @@ from .solve import (
     coord_scales,
     evaluator,
     attach_derivatives,
+    flipped_mask,
+    on_branch,
     implicit_root,
     newton,
     prepare,
@@ -47,15 +49,10 @@ from .solve import (
 )
 from .status import Status
 
-__all__ = ["solve_stroke", "stroke", "predict", "bucket"]
+__all__ = ["solve_stroke", "stroke", "predict", "bucket", "assemble", "checked_step"]
 
 
 # --------------------------------------------------------------------------- predictor
-def on_branch_value(b0, branch):
-    """Whether a branch indicator value has the stroke's sign ``b0`` (0 or NaN: any)."""
-    return (b0 == 0) | ~jnp.isfinite(b0) | (jnp.sign(branch) == b0)
-
-
 def _series_terms(d1, d2, du):
     """``(q' du, q'' du du / 2)`` as elementwise products and sums over the (few) inputs: a
     ``dot`` under ``vmap`` is lowered by XLA according to the batch size, with a rounding
@@ -123,11 +120,59 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
     cond = cond1(js, order)
     br = mech.branch_value(q, u, p)
     ok = (small_max(jnp.abs(dz)) <= _lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
-    ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch_value(b0, br)
+    ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch(b0, br)
     qf = where(ok, q - dz * s, q)
     # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
     packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
     return q, packed[:-1], packed[-1] > 0.5, rn, cond, br
+
+
+# --------------------------------------------------------------------------- restarts
+#: Starts of ``assemble`` besides the guess: fixed offsets from the reference pose, in
+#: half-turns for angles and length scales for lengths (deterministic, so a stroke's result
+#: does not depend on anything but its inputs).
+_STARTS = 6
+
+
+def _offsets(m: int) -> np.ndarray:
+    return np.random.default_rng(20261124).uniform(-1.0, 1.0, (_STARTS, m))
+
+
+def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
+    """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
+    from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
+
+    ``solve.newton`` runs from the guess (the anchor itself where the predicted guess is off
+    the branch; once with a tenth of the step cap) and from ``_STARTS`` fixed offsets
+    around ``ref``, all at once (vmapped: one
+    compiled kernel); the guess's root is kept when it is on the branch, else the first
+    start that reached it (else a root on another branch: ``BRANCH``).  This is the fresh assembly a stroke needs after a gap, where
+    no pose near the last trusted one exists to continue from.  Angles are then moved by
+    whole turns to lie within half a turn of the guess (where the equations allow it:
+    checked on the residual), so a stroke's angles are continuous as numbers.
+
+    Returns ``(q, status, steps, residual, cond, branch)`` like ``newton`` (no ``flipped``).
+    """
+    dtype = guess.dtype
+    s = coord_scales(mech, p, dtype)
+    angle = ~jnp.asarray(mech.coord_is_length())
+    g0 = where(on_branch(target, mech.branch_value(guess, u, p)), guess, ref) if mech.branch is not None else guess
+    starts = jnp.concatenate([g0[None], g0[None], ref[None] + jnp.asarray(_offsets(mech.m), dtype) * where(angle, jnp.pi, s)])
+    # the guess twice: with the usual step cap, and with a tenth of it, which keeps Newton on
+    # the near side of a fold (a toggle the stroke re-enters at) where full steps overshoot
+    caps = jnp.asarray([opts.max_step, 0.1 * opts.max_step] + [opts.max_step] * _STARTS, dtype)
+    q, st, steps, rn, cond, br, _ = jax.vmap(lambda g, c: newton(mech, opts, u, p, g, target, c))(starts, caps)
+    # on the branch first, then a pose that exists only on another branch (BRANCH says more
+    # than a stall), then the guess's own answer; the earliest start wins a tie
+    i = jnp.argmax(where(st == Status.CONVERGED, 2, where(st == Status.BRANCH, 1, 0)))
+    q, st, steps, rn, cond, br = (x[i] for x in (q, st, steps, rn, cond, br))
+    # Whole turns towards the guess, kept only if the equations do not notice them.
+    turns = where(angle, jnp.round((q - guess) / (2 * jnp.pi)), 0.0)
+    q_w = q - 2 * jnp.pi * turns
+    _, ftol, _ = tolerances(opts, dtype)
+    r_w = mech.residual(q_w, u, p) / mech.residual_scales(p, dtype)
+    q = where((st == Status.CONVERGED) & (small_norm(r_w) <= jnp.maximum(ftol, 2 * rn)), q_w, q)
+    return q, st, steps, rn, cond, br
 
 
 # --------------------------------------------------------------------------- shapes
@@ -148,7 +193,7 @@ def _block_size(n: int, anchors: int) -> int:
 def _stroke_program(mech, options, derivs, single, us, p, guess):
     """Strokes of D designs: ``us (N, dof)`` (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
 
-    Returns ``(q, status, steps, residual, cond, branch, d1, d2)`` with ``(D, N)`` in front
+    Returns ``(q, status, steps, residual, cond, branch, flipped, d1, d2)`` with ``(D, N)`` in front
     (the design axis dropped with ``single``); ``d1``, ``d2`` are None without ``derivs``.
     NaN where the status is not ``CONVERGED``.
     """
@@ -199,15 +244,10 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
 
     def robust(u_blk, g, q_a):
         """The full Newton kernel for every point of a block (run only for a block where the
-        checked step failed somewhere: one ``lax.cond`` per block)."""
+        checked step failed somewhere: one ``lax.cond`` per block), from several starts."""
 
         def one(u, p_, b_, g_, q_a):
-            # a predictor off the stroke's branch: start at the anchor itself (the checked
-            # step needs no such test: it checks the branch of its result)
-            g_ = where(on_branch_value(b_, mech.branch_value(g_, u, p_)), g_, q_a)
-            q, st, steps, rn, cond, br = newton(mech, options, u, p_, g_)
-            # converged, but on another branch than the stroke's: BRANCH
-            st = where((st == Status.CONVERGED) & ~on_branch_value(b_, br), Status.BRANCH, st)
+            q, st, steps, rn, cond, br = assemble(mech, options, u, p_, g_, q_a, b_)
             return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
 
         return per_block(one, u_blk, g, jnp.broadcast_to(q_a[:, None], g.shape))
@@ -263,6 +303,8 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     q, status, steps, rn, cond, br, d1, d2 = out
     inputs_ok = p_fin[:, None] & us_fin[None, :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
     status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
+    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(b0, br) if mech.branch is not None else jnp.zeros(status.shape, jnp.int32)
+    flipped = where(status == Status.BRANCH, flipped, 0)
     ok = status == Status.CONVERGED
     q_star = where(ok[..., None], q, jnp.nan)
 
@@ -273,8 +315,64 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         d1 = where(ok[..., None, None], d1, jnp.nan)
         d2 = where(ok[..., None, None, None], d2, jnp.nan)
         d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, None, 0))(d1, d2, q_star, ok, u_out, p)
-    res = (q, status, steps, rn, cond, br, d1, d2)
+    res = (q, status, steps, rn, cond, br, flipped, d1, d2)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
+
+
+def _backward(mech, options, derivs, single, us, p, guess, out, n):
+    """Points that failed after a gap, solved again by continuation from the other side.
+
+    A stroke that re-enters the assemblable range does so at a toggle, where the requested
+    branch's poses exist but are hard to reach from the last pose before the gap (Newton's
+    steps there run across the fold to the other branch).  The same poses are easy to reach
+    from the well-conditioned stretch after them: so where a design has a failed point
+    followed by a converged one, the stroke is walked once more in reverse, from that
+    design's last converged pose, by the same compiled program (same shapes), and the
+    points it solves on the requested branch that the forward pass did not take its answer.
+    Concrete arguments only (the decision is made on the host); inside a user's trace the
+    forward pass stands, and its failures keep their statuses.
+    """
+    status = np.asarray(out[1]).reshape(-1, us.shape[0])[:, :n]
+    conv = status == Status.CONVERGED
+    # a failed point with a converged one after it
+    later = np.flip(np.logical_or.accumulate(np.flip(conv, 1), 1), 1)
+    need = np.any(~conv[:, :-1] & later[:, 1:], axis=1)
+    if not np.any(need):
+        return out
+    last = n - 1 - np.argmax(np.flip(conv, 1), axis=1)
+    q = np.asarray(out[0]).reshape(-1, us.shape[0], mech.m)
+    start = np.where(need[:, None], q[np.arange(q.shape[0]), last], np.asarray(guess))
+    order = np.concatenate([np.arange(n - 1, -1, -1), np.zeros(us.shape[0] - n, int)])
+    back = _stroke_program(mech, options, derivs, single, jax.device_put(np.asarray(us)[order]), p, jax.device_put(start.reshape(np.shape(guess))))
+    axis = 0 if single else 1
+    undo = np.concatenate([np.arange(n - 1, -1, -1), np.arange(n, us.shape[0])])  # reversed index of each point
+    status_b = np.asarray(back[1]).reshape(-1, us.shape[0])[:, undo][:, :n]
+    take = need[:, None] & ~conv & (status_b == Status.CONVERGED)
+    take = np.concatenate([take, np.zeros((take.shape[0], us.shape[0] - n), bool)], axis=1)
+    take = take[0] if single else take
+
+    def merge(f, b):
+        if f is None:
+            return None
+        f, b = np.asarray(f), np.take(np.asarray(b), undo, axis=axis)
+        return np.where(take.reshape(take.shape + (1,) * (f.ndim - take.ndim)), b, f)
+
+    merged = [merge(f, b) for f, b in zip(out, back)]
+    # The reverse walk may count turns differently: shift each run it filled by the whole
+    # turns that match it to the forward pass at the converged point that follows the run
+    # (where both passes found the same pose), so the angles stay continuous as numbers.
+    qf = np.asarray(out[0]).reshape(-1, us.shape[0], mech.m)
+    qb = np.take(np.asarray(back[0]), undo, axis=axis).reshape(qf.shape)
+    qm = merged[0].reshape(qf.shape)
+    filled = take.reshape(-1, us.shape[0])
+    for d_ in range(qf.shape[0]):
+        runs = np.flatnonzero(filled[d_] & ~np.concatenate([[False], filled[d_, :-1]]))
+        for r0 in runs:
+            r1 = r0 + np.argmin(filled[d_, r0:]) if not filled[d_, -1] else us.shape[0]
+            if r1 < n and conv[d_, r1] and status_b[d_, r1] == Status.CONVERGED:
+                qm[d_, r0:r1] += 2 * np.pi * np.round((qf[d_, r1] - qb[d_, r1]) / (2 * np.pi))
+    merged[0] = qm.reshape(merged[0].shape)
+    return tuple(None if x is None else jax.device_put(x) for x in merged)
 
 
 def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, anchors: int | None = None):
@@ -303,6 +401,8 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[-1:], nb - n, axis=0)])
     out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf)
+    if not traced:
+        out = _backward(mech, options, bool(derivs), single, us_, pf, gf, out, n)
     if nb > n:
         axis = 0 if single else 1
         if traced:
@@ -310,8 +410,8 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
         else:
             # jax.device_put, not jnp.asarray: the latter compiles a small staging program per shape
             out = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x).take(np.arange(n), axis=axis)), out)
-    q, status, steps, rn, cond, br, d1, d2 = out
-    sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, coords=mech.coords)
+    q, status, steps, rn, cond, br, flipped, d1, d2 = out
+    sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, flipped=flipped, coords=mech.coords, branches=mech.branches)
     return sol, d1, d2
 
 

@@ -52,7 +52,7 @@ from .kinematics import chain_rule, time_derivatives
 from .mechanism import Mechanism, Vars
 from ._linalg import cond1, solve_small
 from .continuation import stroke
-from .solve import SolverOptions, as_coords, as_inputs, implicit_root, solve, solve_one, tolerances
+from .solve import SolverOptions, as_coords, as_inputs, implicit_root, on_branch, solve, solve_one, tolerances
 from .status import Status
 
 __all__ = [
@@ -875,7 +875,7 @@ def _close(mech: Mechanism, u, p, qg, iters: int):
     s_ = jnp.where(jnp.asarray(mech.coord_is_length()), scale, 1.0)
     ok = ok & (cond1(jax.jacfwd(mech.residual)(q, us, ps) * s_[None, :] / scale) <= cond_max)
     if mech.branch is not None:
-        ok = ok & (jnp.sign(mech.branch_value(q, us, ps)) == jnp.sign(mech.branch_value(stop(qg), us, ps)))
+        ok = ok & on_branch(jnp.sign(mech.branch_value(stop(qg), us, ps)), mech.branch_value(q, us, ps))
     q_star = jnp.where(ok, q, jnp.nan)
     return implicit_root(mech, q_star, ok, u, p), ok
 

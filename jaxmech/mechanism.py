@@ -152,8 +152,10 @@ class Mechanism:
     - `signed`: length parameters that may be zero or negative (offsets).  Every other
       length parameter must be positive and finite.
     - `points`: optional ``{name: fn(q, u, p) -> complex}`` points of interest (m).
-    - `branch`: optional ``fn(q, u, p) -> real`` whose sign identifies the assembly mode
-      (for example a cross product).  A solve reports when the sign changed.
+    - `branch`: optional ``fn(q, u, p)`` whose sign identifies the assembly mode (for
+      example a cross product): one real number, or one per assembly choice (a sequence,
+      or a mapping ``{loop name: value}``), each checked on its own.  A solve reports
+      ``BRANCH`` when a sign changed and names the loop (``Solution.message``).
     - `residual_scale`: optional ``fn(p) -> scalar or (m,)`` in the residual's own units.
       Loop closures are in metres and need none (the length scale is used); equations in
       other units (a moment balance in N m) give theirs here so that the residual tolerance
@@ -296,10 +298,33 @@ class Mechanism:
         return jnp.asarray(fn(self.vars_q(q), self.vars_u(u), self.vars_p(p)))
 
     def branch_value(self, q, u, p):
-        """The branch indicator (its sign names the assembly mode), or NaN if none is defined."""
+        """The branch indicator: ``()`` for one value, ``(n_branches,)`` for one per assembly
+        choice (their signs name the assembly mode), or NaN if none is defined."""
         if self.branch is None:
             return jnp.asarray(jnp.nan, dtype=jnp.result_type(q))
-        return jnp.asarray(self.branch(self.vars_q(q), self.vars_u(u), self.vars_p(p)))
+        b = self.branch(self.vars_q(q), self.vars_u(u), self.vars_p(p))
+        if isinstance(b, Mapping):
+            b = list(b.values())
+        if isinstance(b, (list, tuple)):
+            return jnp.stack([jnp.reshape(jnp.asarray(x), ()) for x in b])
+        return jnp.asarray(b)
+
+    @functools.cached_property
+    def branches(self) -> tuple[str, ...]:
+        """Names of the branch indicator's entries (its loops): the mapping's keys, ``"loop 1"``,
+        ``"loop 2"``, ... for a sequence, ``("branch",)`` for one value, ``()`` for none."""
+        if self.branch is None:
+            return ()
+        dtype = jnp.zeros(()).dtype
+        args = (jax.ShapeDtypeStruct((self.m,), dtype), jax.ShapeDtypeStruct((self.dof,), dtype), {n: jax.ShapeDtypeStruct((), dtype) for n in self.params})
+        out = jax.eval_shape(lambda q, u, p: self.branch(self.vars_q(q), self.vars_u(u), self.vars_p(p)), *args)
+        if isinstance(out, Mapping):
+            return tuple(str(k) for k in out)
+        if isinstance(out, (list, tuple)):
+            return tuple(f"loop {i + 1}" for i in range(len(out)))
+        if len(out.shape) == 1:
+            return tuple(f"loop {i + 1}" for i in range(out.shape[0]))
+        return ("branch",)
 
     def length_scale(self, p: Mapping):
         """Characteristic length of a design (m): the largest magnitude among length parameters.

@@ -28,9 +28,9 @@ import numpy as np
 from ._linalg import cond1, small_max, small_norm, small_tmatmul, solve_blocks, solve_small, where
 from .mechanism import Mechanism
 from .structure import blocks
-from .status import Status
+from .status import Status, status_message
 
-__all__ = ["SolverOptions", "Solution", "solve", "solve_one", "newton", "implicit_root", "root_derivatives", "attach_derivatives", "tolerances", "coord_scales", "evaluator"]
+__all__ = ["SolverOptions", "Solution", "solve", "solve_one", "newton", "on_branch", "off_branch", "flipped_mask", "implicit_root", "root_derivatives", "attach_derivatives", "tolerances", "coord_scales", "evaluator"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,8 +77,12 @@ class Solution:
     - `steps`: iterations used.
     - `residual`: final ``|Phi / R|_2``, R the residual scale (the length scale for loops).
     - `cond`: 1-norm condition number of the scaled constraint Jacobian ``Phi_q``.
-    - `branch`: the mechanism's branch indicator at the solution (NaN if none defined).
+    - `branch`: the mechanism's branch indicator at the solution, ``(...)`` or
+      ``(..., n_branches)`` for one per loop (NaN if none defined).
+    - `flipped`: ``(...)`` int32 bit mask of the branch entries whose sign differs from the
+      requested one (bit ``i`` for ``branches[i]``); nonzero exactly where ``BRANCH``.
     - `coords`: coordinate names (static).
+    - `branches`: names of the branch indicator's entries (static).
     """
 
     q: jax.Array
@@ -87,7 +91,9 @@ class Solution:
     residual: jax.Array
     cond: jax.Array
     branch: jax.Array
+    flipped: jax.Array
     coords: tuple = dataclasses.field(metadata=dict(static=True), default=())
+    branches: tuple = dataclasses.field(metadata=dict(static=True), default=())
 
     def __getitem__(self, name: str):
         """Coordinate by name: ``sol["theta3"]``."""
@@ -100,6 +106,25 @@ class Solution:
     def ok(self):
         """Boolean mask of converged samples."""
         return self.status == Status.CONVERGED
+
+    def message(self, index=()) -> str:
+        """Why the sample at ``index`` (a tuple into the batch shape) has its status, in
+        words: for ``BRANCH`` the loops whose assembly flipped, for ``SINGULAR`` the
+        condition number, with the fix."""
+        code = int(np.asarray(self.status)[index])
+        text = status_message(code)
+        if code == Status.BRANCH:
+            bits = int(np.asarray(self.flipped)[index])
+            loops = [n for i, n in enumerate(self.branches) if bits >> i & 1]
+            if loops:
+                text += f": {', '.join(repr(n) for n in loops)} flipped; give a guess (or stroke start) on the branch you want, or a stroke that stays on it"
+        elif code == Status.SINGULAR:
+            text += (
+                f": scaled condition number {float(np.asarray(self.cond)[index]):.3g} is inside the toggle band "
+                "(SolverOptions.cond_max); keep the input away from the toggle, where positions and "
+                "their derivatives are ill-defined"
+            )
+        return text
 
 
 # --------------------------------------------------------------------------- tolerances
@@ -147,6 +172,24 @@ def evaluator(mech: Mechanism, u, p, dtype):
     return evaluate, s
 
 
+# --------------------------------------------------------------------------- branches
+def off_branch(target, value):
+    """Per branch entry: whether ``value``'s sign differs from the requested sign ``target``
+    (``target`` 0 or NaN: that entry is free).  Shapes ``()`` or ``(n_branches,)``."""
+    return (target != 0) & jnp.isfinite(target) & (jnp.sign(value) != target)
+
+
+def on_branch(target, value):
+    """Whether a branch indicator ``value`` has every requested sign ``target``."""
+    return ~jnp.any(off_branch(target, value))
+
+
+def flipped_mask(target, value):
+    """int32 bit mask of the branch entries off their requested sign (``Solution.flipped``)."""
+    off = jnp.atleast_1d(off_branch(target, value))
+    return jnp.sum(where(off, 2 ** jnp.arange(off.shape[-1], dtype=jnp.int32), 0), axis=-1).astype(jnp.int32)
+
+
 # --------------------------------------------------------------------------- the Newton kernel
 class _NewtonState(NamedTuple):
     """Loop state of ``newton`` (one sample).  ``q``, ``r``, ``rn``, ``js`` belong to the best
@@ -167,7 +210,7 @@ class _NewtonState(NamedTuple):
     crossed: jax.Array  # whether the guard refused a better step
 
 
-def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
+def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None):
     """Damped Newton / Levenberg-Marquardt for one sample (no gradients): the one kernel that
     serves single solves, stroke anchors and every stroke point.
 
@@ -177,13 +220,16 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     (at the trial point; the first iteration at the guess) and solves one small system: the
     Newton step while steps lower ``|Phi|``, else the Levenberg-Marquardt step with
     parameter ``mu``, which makes far-off guesses safe without costing the quadratic
-    convergence near a root.  A step that flips the branch indicator's sign is refused like
-    one that raises the residual, so the damping finds the root on the guess's branch; if
-    the residual then stalls, the guard is lifted once: a root found across is ``BRANCH``,
-    none found ``INFEASIBLE``.
+    convergence near a root.  A step that leaves the requested branch (``target``: the
+    signs of the branch indicator, by default the guess's) is refused like one that raises
+    the residual, so the damping finds the root on that branch; if the residual then
+    stalls, the guard is lifted once: a root found across is ``BRANCH``, none found
+    ``INFEASIBLE``.  A guess off the requested branch may move freely until it reaches it.
 
-    Returns ``(q, status, steps, residual, cond, branch)``; ``q`` is the last iterate (not
-    masked).  A closed residual (``<= ftol``) whose step cannot meet ``xtol`` means the
+    ``max_step`` (may be traced) overrides ``opts.max_step``.
+
+    Returns ``(q, status, steps, residual, cond, branch, flipped)``; ``q`` is the last
+    iterate (not masked), ``flipped`` the ``Solution.flipped`` bit mask.  A closed residual (``<= ftol``) whose step cannot meet ``xtol`` means the
     Jacobian is (nearly) singular at an existing pose: ``SINGULAR``, whatever the units.
     """
     dtype = guess.dtype
@@ -194,6 +240,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     eye = jnp.eye(m, dtype=dtype)
 
     order = blocks(mech)
+    cap = opts.max_step if max_step is None else max_step
 
     def damped(a, r, mu):
         # One solve: Newton (a dz = r) or LM ((a'a + mu D) dz = a' r), chosen by mu.
@@ -219,13 +266,13 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         dz = where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
         size = small_max(jnp.abs(dz))
         # Cap the step: far from a root a Newton step can leap onto another branch.
-        return dz * jnp.minimum(1.0, opts.max_step / jnp.maximum(size, tiny)), size
+        return dz * jnp.minimum(1.0, cap / jnp.maximum(size, tiny)), size
 
     if mech.branch is not None:
-        b_guess = jnp.sign(mech.branch_value(guess, u, p))
+        b_guess = jnp.sign(mech.branch_value(guess, u, p)) if target is None else target
 
         def same_branch(q):
-            return (b_guess == 0) | (jnp.sign(mech.branch_value(q, u, p)) == b_guess)
+            return on_branch(b_guess, mech.branch_value(q, u, p))
     else:
 
         def same_branch(q):
@@ -239,14 +286,14 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         rt, jt = evaluate(qt)
         rtn = small_norm(rt)
         better = jnp.isfinite(rtn) & ((rtn < st.rn) | (rtn <= ftol))
-        on_branch = same_branch(qt) | ~st.guard
-        crossed = st.crossed | (better & ~on_branch)
-        accept = better & on_branch
+        on_b = same_branch(qt) | ~st.guard | ~same_branch(st.q)
+        crossed = st.crossed | (better & ~on_b)
+        accept = better & on_b
         q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
         mu = where(accept, where(st.mu > 1e-6, st.mu / 10.0, 0.0), jnp.maximum(10.0 * st.mu, 1e-3))
         # Steps refused only for crossing the branch are not lack of progress: the damping
         # is still shortening them towards this branch's root.
-        slow = where(accept & (rtn < 0.9 * st.rn), 0, where(better & ~on_branch, st.slow, st.slow + 1))
+        slow = where(accept & (rtn < 0.9 * st.rn), 0, where(better & ~on_b, st.slow, st.slow + 1))
         stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(small_max(jnp.sum(js * js, axis=0)), 1.0))
         lift = stalled & st.guard & crossed
         mu = where(lift, 0.0, mu)
@@ -266,9 +313,13 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
     )
     st = jax.lax.while_loop(cond_fn, body, init)
 
-    converged = (st.size <= xtol) & (st.rn <= ftol)
-    q = where(converged, st.q - st.dz * s, st.q)  # the last Newton step is free: it was computed already
     cond = cond1(st.js, blocks(mech))
+    # Near a toggle the attainable accuracy of q is about cond * eps, not xtol: a closed
+    # residual whose next step is within that is converged (the band above cond_max is
+    # SINGULAR), so below the band the status does not hang on round-off or on the units.
+    eps = float(jnp.finfo(dtype).eps)
+    converged = (st.size <= jnp.maximum(xtol, 8.0 * eps * jnp.minimum(cond, cond_max))) & (st.rn <= ftol)
+    q = where(converged, st.q - st.dz * s, st.q)  # the last Newton step is free: it was computed already
     finite = inputs_ok & jnp.isfinite(st.rn) & jnp.all(jnp.isfinite(q))
     closed = st.rn <= ftol
     status = where(
@@ -281,14 +332,14 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess):
         ),
     ).astype(jnp.int32)
     if mech.branch is not None:
-        b_sol = mech.branch_value(q, u, p)
-        flipped = (b_guess != jnp.sign(b_sol)) & (b_guess != 0)
-        status = where((status == Status.CONVERGED) & flipped, Status.BRANCH, status).astype(jnp.int32)
-        branch = b_sol
+        branch = mech.branch_value(q, u, p)
+        status = where((status == Status.CONVERGED) & ~on_branch(b_guess, branch), Status.BRANCH, status).astype(jnp.int32)
+        flipped = where(status == Status.BRANCH, flipped_mask(b_guess, branch), 0)
     else:
         branch = jnp.asarray(jnp.nan, dtype)
+        flipped = jnp.zeros((), jnp.int32)
     steps = jnp.maximum(st.k - 1, 0)
-    return q, status, steps, st.rn, cond, branch
+    return q, status, steps, st.rn, cond, branch, flipped
 
 
 # --------------------------------------------------------------------------- implicit derivatives
@@ -383,11 +434,11 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
     Returns a ``Solution`` with scalar status.  No checks: use ``solve`` from user code.
     """
     stop = jax.lax.stop_gradient
-    q_raw, status, steps, rn, cond, branch = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
+    q_raw, status, steps, rn, cond, branch, flipped = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
     ok = status == Status.CONVERGED
     q_star = where(ok, q_raw, jnp.nan)
     q = implicit_root(mech, q_star, ok, u, p)
-    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, coords=mech.coords)
+    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, flipped=flipped, coords=mech.coords, branches=mech.branches)
 
 
 # --------------------------------------------------------------------------- user-facing batching
@@ -514,12 +565,10 @@ def raise_if_failed(sol: Solution):
     status = np.asarray(sol.status)
     if np.any(status != Status.CONVERGED):
         bad = {k: v for k, v in status_counts(status).items() if k != "CONVERGED"}
-        first = int(np.flatnonzero(status.ravel() != Status.CONVERGED)[0])
-        from .status import status_message
-
+        first = np.argwhere(status != Status.CONVERGED)[0]
         raise RuntimeError(
             f"{int(np.sum(status != Status.CONVERGED))} of {status.size} samples failed {bad}; "
-            f"first at flat index {first}: {status_message(status.ravel()[first])}"
+            f"first at index {tuple(int(i) for i in first)}: {sol.message(tuple(first))}"
         )
 
 

@@ -21,8 +21,9 @@ from +x, SI units; the flap deflections ``delta`` and ``theta`` are *clockwise*
 **Branch.**  Of the four assemblies at ``alpha = 275 deg`` (loop 1 has only one), the
 scene takes the dyad signs (+, -, +): flaps retracted at the start (delta = 0.95 deg,
 theta = 0.02 deg) and the second flap turning through 60.58 deg over the stroke, the
-design goal of §1.  The branch indicator ``min(cos(beta+delta), -sin(phi-psi),
-cos(theta+xi))`` is positive on it; it vanishes at a toggle of any loop.
+design goal of §1.  The branch indicator has one entry per loop, ``cos(beta+delta)``,
+``-sin(phi-psi)``, ``cos(theta+xi)``, all positive on it; an entry vanishes at a toggle of
+its loop, and a flip is reported ``BRANCH`` naming the loop.
 
 **Loads (§3.1).**  Masses ``M``, ``m`` at the chord midpoints ``G1``, ``G2`` with
 inertias ``J_M``, ``J_m``; gravity ``G``; linearised lift ``F1 = q S1 Cl_delta delta`` at
@@ -164,10 +165,12 @@ def _branch(q, u, p):
     # Each loop's 2x2 Jacobian determinant over its own unknowns is, up to a positive
     # factor, cos(beta+delta), -sin(phi-psi), cos(theta+xi): the sign of the cross
     # product of the loop's two unknown links, i.e. its assembly mode.  All three are
-    # positive on the chosen branch; the minimum changes sign if any dyad flips.
-    return jnp.minimum(
-        jnp.minimum(jnp.cos(q.beta + q.delta), -jnp.sin(q.phi - q.psi)), jnp.cos(q.theta + q.xi)
-    )
+    # positive on the chosen branch, each checked on its own (a flip names its loop).
+    return {
+        "loop 1 (beta, delta)": jnp.cos(q.beta + q.delta),
+        "loop 2 (phi, psi)": -jnp.sin(q.phi - q.psi),
+        "loop 3 (xi, theta)": jnp.cos(q.theta + q.xi),
+    }
 
 
 mechanism = Mechanism(
@@ -436,7 +439,7 @@ def singular_positions(p: Mapping | None = None, *, step_deg: float = 1.0, span_
         for _ in range(int(np.ceil(span_deg / step_deg / (_CHUNK - 1)))):
             us = a0 + sgn * step * np.arange(_CHUNK)
             sol = solve_stroke(mechanism, jnp.asarray(us), p, qa)
-            good = (np.asarray(sol.status) == Status.CONVERGED) & (np.asarray(sol.branch) > 0)
+            good = (np.asarray(sol.status) == Status.CONVERGED) & np.all(np.asarray(sol.branch) > 0, axis=-1)
             if not good[0]:
                 raise RuntimeError(f"flap_msd: the branch is lost at alpha = {np.rad2deg(a0):.6g} deg")
             if not np.all(good):
