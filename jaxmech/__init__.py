@@ -44,11 +44,11 @@ from .kinematics import time_derivatives as time_derivatives
 from .mechanism import Mechanism as Mechanism
 from .mechanism import Vars as Vars
 from .mechanism import cis as cis
-from .solve import Solution as Solution
-from .solve import SolverOptions as SolverOptions
-from .solve import implicit_root as implicit_root
-from .solve import solve as solve
-from .solve import solve_one as solve_one
+from .solution import Solution as Solution
+from .options import SolverOptions as SolverOptions
+from .implicit import implicit_root as implicit_root
+from .positions import solve as solve
+from .positions import solve_one as solve_one
 from .status import Status as Status
 from .status import status_counts as status_counts
 from .status import status_message as status_message

@@ -4,7 +4,7 @@ A stroke ``us (N, dof)`` is cut into blocks of ``k`` consecutive points.  A ``la
 walks the blocks in order; the last point of each solved block is the *anchor* of the
 next: its root ``q`` and the implicit derivatives ``dq/du``, ``d2q/du2`` there give every
 point of the next block a second-order predicted guess, and the one Newton kernel
-(``solve.newton``) solves the whole block at once (vectorised over its points and over
+(``newton.newton``) solves the whole block at once (vectorised over its points and over
 the designs).  So one compiled kernel serves anchors and points alike, and a block whose
 guesses are good (a smooth stroke) takes one Newton step per point.
 
@@ -31,22 +31,11 @@ from ._linalg import cond1, small_max, small_norm, solve_blocks, where
 from ._xla import unfused
 from .mechanism import Mechanism
 from .structure import blocks
-from .solve import (
-    Solution,
-    SolverOptions,
-    batch_shape,
-    coord_scales,
-    evaluator,
-    attach_derivatives,
-    flipped_mask,
-    on_branch,
-    implicit_root,
-    newton,
-    prepare,
-    raise_if_failed,
-    root_derivatives,
-    tolerances,
-)
+from .implicit import attach_derivatives, implicit_root, root_derivatives
+from .inputs import batch_shape, prepare
+from .newton import coord_scales, evaluator, flipped_mask, on_branch, newton
+from .options import SolverOptions, tolerances
+from .solution import Solution, raise_if_failed
 from .status import Status
 
 __all__ = ["solve_stroke", "stroke", "predict", "bucket", "assemble", "checked_step"]
@@ -83,7 +72,7 @@ def _trusted_terms(d1, d2, du, s, max_step):
 def predict(q, d1, d2, du, s, max_step):
     """Guarded second-order predictor ``q + q' du + q'' du du / 2`` from a solved anchor
     (``q (m,)``, ``d1 (m, dof)``, ``d2 (m, dof, dof)``) over ``du (dof,)``, with the terms
-    its series cannot be trusted with dropped.  ``s``: coordinate scales (``solve.coord_scales``)."""
+    its series cannot be trusted with dropped.  ``s``: coordinate scales (``newton.coord_scales``)."""
     d1, d2 = _trusted_terms(d1, d2, du, s, max_step)
     first, second = _series_terms(d1, d2, du)
     return q + first + second
@@ -100,8 +89,8 @@ def _lean_xtol(opts: SolverOptions, dtype):
 
 def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
     """One plain Newton step from a close (predicted) guess, then the convergence,
-    conditioning, finiteness and branch tests of ``solve.newton``: straight-line code for
-    the common case of a stroke point; the points that fail it go to ``solve.newton``.
+    conditioning, finiteness and branch tests of ``newton.newton``: straight-line code for
+    the common case of a stroke point; the points that fail it go to ``newton.newton``.
 
     Returns ``(q1, q, ok, residual, cond, branch)``: ``q1`` is the iterate the tests (and the
     derivatives) are evaluated at, always finite; ``q = q1 - dz`` adds the next step.
@@ -142,7 +131,7 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
     """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
     from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
 
-    ``solve.newton`` runs from the guess (the anchor itself where the predicted guess is off
+    ``newton.newton`` runs from the guess (the anchor itself where the predicted guess is off
     the branch; once with a tenth of the step cap) and from ``_STARTS`` fixed offsets
     around ``ref``, all at once (vmapped: one
     compiled kernel); the guess's root is kept when it is on the branch, else the first

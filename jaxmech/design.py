@@ -31,7 +31,7 @@ import numpy as np
 import optax
 
 from .scenes.base import Scene
-from .solve import SolverOptions
+from .options import SolverOptions
 from .status import Status
 from .sweep import design_columns
 

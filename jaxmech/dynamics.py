@@ -19,7 +19,7 @@ scalar virtual-work function ``W(x) = sum m a_G . r_G(x) + J alpha phi(x) - F . 
 M phi(x) + V(x) + T L(x)`` with the accelerations and loads frozen at the actual state.
 The ``q`` rows give ``lambda = -Phi_q^{-T} (I - Q)_q``, the ``u`` rows
 ``tau = (I - Q)_u + Phi_u^T lambda``.  Accelerations come from the implicit kinematics
-(nested ``jax.jvp`` through ``solve.implicit_root``), never from Newton iterates.
+(nested ``jax.jvp`` through ``implicit.implicit_root``), never from Newton iterates.
 
 **Reactions.**  ``-Phi_x^T lambda`` is the generalized constraint force.  For a complex loop
 written ``path_1 - path_2 = 0`` (the two ways to reach the closing joint), the pair
@@ -52,7 +52,11 @@ from .kinematics import chain_rule, time_derivatives
 from .mechanism import Mechanism, Vars
 from ._linalg import cond1, solve_small
 from .continuation import stroke
-from .solve import SolverOptions, as_coords, as_inputs, implicit_root, on_branch, solve, solve_one, tolerances
+from .implicit import implicit_root
+from .inputs import as_coords, as_inputs
+from .newton import on_branch
+from .options import SolverOptions, tolerances
+from .positions import solve, solve_one
 from .status import Status
 
 __all__ = [

@@ -6,7 +6,7 @@ derivatives are nested forward-mode derivatives of ``t -> q*(u(t), p)``:
     q_dot  = q' u_dot,      q_ddot = q' u_ddot + q''[u_dot, u_dot],
 
 with ``q' = dq/du`` and ``q'' = d2q/du2`` given by the implicit function theorem
-(``solve.implicit_root``).  Nothing is differentiated through Newton iterations.
+(``implicit.implicit_root``).  Nothing is differentiated through Newton iterations.
 """
 
 from __future__ import annotations
@@ -20,7 +20,9 @@ import jax.numpy as jnp
 
 from .mechanism import Mechanism
 from .continuation import solve_stroke, stroke
-from .solve import Solution, SolverOptions, implicit_root, root_derivatives
+from .implicit import implicit_root, root_derivatives
+from .options import SolverOptions
+from .solution import Solution
 
 __all__ = [
     "ConstantSpeed",

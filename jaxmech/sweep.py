@@ -30,7 +30,7 @@ import numpy as np
 from .continuation import stroke
 from .kinematics import ConstantSpeed, Motion, sample_kinematics
 from .scenes.base import Scene
-from .solve import SolverOptions
+from .options import SolverOptions
 from .status import Status, status_counts
 
 __all__ = ["SweepResult", "grid", "random_designs", "sweep_scene"]

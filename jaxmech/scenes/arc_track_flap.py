@@ -71,7 +71,7 @@ import numpy as np
 from ..actuators import ScrewJack
 from ..dynamics import Body, Gravity, Model, Moment, generalized_forces
 from ..mechanism import Mechanism, cis
-from ..solve import solve_one
+from ..positions import solve_one
 from ..status import Status, status_message
 from .base import Scene, run_scene
 

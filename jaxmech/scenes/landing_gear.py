@@ -59,7 +59,9 @@ import numpy as np
 
 from ..kinematics import ConstantSpeed, Motion, input_derivatives, motion
 from ..mechanism import Mechanism, cis
-from ..solve import Solution, SolverOptions, solve
+from ..options import SolverOptions
+from ..positions import solve
+from ..solution import Solution
 from .base import Scene
 
 __all__ = [

@@ -69,7 +69,9 @@ import numpy as np
 
 from ..actuators import LinearSpring, SMAWire
 from ..mechanism import Mechanism, Vars
-from ..solve import Solution, SolverOptions, solve
+from ..options import SolverOptions
+from ..positions import solve
+from ..solution import Solution
 from .base import Scene
 
 __all__ = [

@@ -1,0 +1,219 @@
+"""The Newton kernel: damped Newton / Levenberg-Marquardt on the loop-closure equations for
+one sample, in scaled variables, with a branch guard; and the branch-sign helpers."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ._linalg import cond1, small_max, small_norm, small_tmatmul, solve_blocks, solve_small, where
+from .mechanism import Mechanism
+from .options import SolverOptions, tolerances
+from .status import Status
+from .structure import blocks
+
+__all__ = ["newton", "evaluator", "coord_scales", "on_branch", "off_branch", "flipped_mask", "all_finite"]
+
+
+def all_finite(tree) -> jax.Array:
+    leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
+
+
+
+def coord_scales(mech: Mechanism, p, dtype):
+    """``s (m,)``: 1 for angles, the design's length scale for lengths (m)."""
+    L = mech.length_scale(p).astype(dtype)
+    return where(jnp.asarray(mech.coord_is_length()), L, jnp.ones((), dtype))
+
+
+def evaluator(mech: Mechanism, u, p, dtype):
+    """``q -> (Phi/R, d(Phi/R)/dz)`` with ``z = q / s``, and the coordinate scales ``s``.
+
+    ``s`` is 1 for angles and the design's length scale for lengths; ``R`` is the residual
+    scale (the length scale for loop closures).  Both make tolerances unit-independent.
+    """
+    R = mech.residual_scales(p, dtype)
+    s = coord_scales(mech, p, dtype)
+
+    def evaluate(q):
+        def f(q_):
+            r = mech.residual(q_, u, p) / R
+            return r, r
+
+        j, r = jax.jacfwd(f, has_aux=True)(q)
+        return r, j * s[None, :]
+
+    return evaluate, s
+
+
+# --------------------------------------------------------------------------- branches
+def off_branch(target, value):
+    """Per branch entry: whether ``value``'s sign differs from the requested sign ``target``
+    (``target`` 0 or NaN: that entry is free).  Shapes ``()`` or ``(n_branches,)``."""
+    return (target != 0) & jnp.isfinite(target) & (jnp.sign(value) != target)
+
+
+def on_branch(target, value):
+    """Whether a branch indicator ``value`` has every requested sign ``target``."""
+    return ~jnp.any(off_branch(target, value))
+
+
+def flipped_mask(target, value):
+    """int32 bit mask of the branch entries off their requested sign (``Solution.flipped``)."""
+    off = jnp.atleast_1d(off_branch(target, value))
+    return jnp.sum(where(off, 2 ** jnp.arange(off.shape[-1], dtype=jnp.int32), 0), axis=-1).astype(jnp.int32)
+
+
+# --------------------------------------------------------------------------- the kernel
+class _NewtonState(NamedTuple):
+    """Loop state of ``newton`` (one sample).  ``q``, ``r``, ``rn``, ``js`` belong to the best
+    iterate so far; ``dz`` is the next scaled step from it."""
+
+    k: jax.Array  # iterations run (the first only evaluates the guess)
+    q: jax.Array  # best iterate (m,)
+    r: jax.Array  # scaled residual there (m,)
+    rn: jax.Array  # its 2-norm (inf before the first evaluation)
+    js: jax.Array  # scaled Jacobian there (m, m)
+    dz: jax.Array  # next scaled step (m,), capped at max_step
+    size: jax.Array  # max |dz| before the cap
+    mu: jax.Array  # Levenberg-Marquardt parameter (0: plain Newton)
+    slow: jax.Array  # iterations without a 10% residual decrease
+    done: jax.Array
+    stalled: jax.Array
+    guard: jax.Array  # whether steps that flip the branch indicator are refused
+    crossed: jax.Array  # whether the guard refused a better step
+
+
+def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None):
+    """Damped Newton / Levenberg-Marquardt for one sample (no gradients): the one kernel that
+    serves single solves, stroke anchors and every stroke point.
+
+    Work is in scaled variables: ``z = q / s`` with ``s`` = 1 for angles and the design's
+    length scale ``L`` for lengths, residual ``Phi / R`` (``R = L`` for loop closures, or the
+    mechanism's ``residual_scale``).  Each iteration evaluates the residual and Jacobian once
+    (at the trial point; the first iteration at the guess) and solves one small system: the
+    Newton step while steps lower ``|Phi|``, else the Levenberg-Marquardt step with
+    parameter ``mu``, which makes far-off guesses safe without costing the quadratic
+    convergence near a root.  A step that leaves the requested branch (``target``: the
+    signs of the branch indicator, by default the guess's) is refused like one that raises
+    the residual, so the damping finds the root on that branch; if the residual then
+    stalls, the guard is lifted once: a root found across is ``BRANCH``, none found
+    ``INFEASIBLE``.  A guess off the requested branch may move freely until it reaches it.
+
+    ``max_step`` (may be traced) overrides ``opts.max_step``.
+
+    Returns ``(q, status, steps, residual, cond, branch, flipped)``; ``q`` is the last
+    iterate (not masked), ``flipped`` the ``Solution.flipped`` bit mask.  A closed residual (``<= ftol``) whose step cannot meet ``xtol`` means the
+    Jacobian is (nearly) singular at an existing pose: ``SINGULAR``, whatever the units.
+    """
+    dtype = guess.dtype
+    xtol, ftol, cond_max = tolerances(opts, dtype)
+    tiny = float(jnp.finfo(dtype).tiny)
+    evaluate, s = evaluator(mech, u, p, dtype)
+    m = mech.m
+    eye = jnp.eye(m, dtype=dtype)
+
+    order = blocks(mech)
+    cap = opts.max_step if max_step is None else max_step
+
+    def damped(a, r, mu):
+        # One solve: Newton (a dz = r) or LM ((a'a + mu D) dz = a' r), chosen by mu.
+        lm = mu > 0
+        ata = small_tmatmul(a, a)
+        eye_b = jnp.eye(a.shape[0], dtype=dtype)
+        return solve_small(where(lm, ata + mu * (ata * eye_b + 1e-12 * eye_b), a), where(lm, small_tmatmul(a, r), r))
+
+    def step(r, js, mu):
+        if len(order) == 1:
+            dz = damped(js, r, mu)
+        else:
+            # Block-triangular Jacobian (structure.py): the step block by block, each block's
+            # right-hand side less the earlier blocks' share; with mu = 0 this is the Newton
+            # step exactly, with mu > 0 each block is damped as Levenberg-Marquardt.
+            x: dict = {}
+            for rows, cols in order:
+                rhs = jnp.stack([r[i] - sum((js[i, j] * xj for j, xj in x.items()), jnp.zeros((), dtype)) for i in rows])
+                sub = jnp.stack([jnp.stack([js[i, j] for j in cols]) for i in rows])
+                xb = damped(sub, rhs, mu)
+                x.update({j: xb[t] for t, j in enumerate(cols)})
+            dz = jnp.stack([x[j] for j in range(m)])
+        dz = where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
+        size = small_max(jnp.abs(dz))
+        # Cap the step: far from a root a Newton step can leap onto another branch.
+        return dz * jnp.minimum(1.0, cap / jnp.maximum(size, tiny)), size
+
+    if mech.branch is not None:
+        b_guess = jnp.sign(mech.branch_value(guess, u, p)) if target is None else target
+
+        def same_branch(q):
+            return on_branch(b_guess, mech.branch_value(q, u, p))
+    else:
+
+        def same_branch(q):
+            return jnp.asarray(True)
+
+    def cond_fn(st: _NewtonState):
+        return (~st.done) & (st.k < opts.max_steps + 1)
+
+    def body(st: _NewtonState) -> _NewtonState:
+        qt = st.q - st.dz * s
+        rt, jt = evaluate(qt)
+        rtn = small_norm(rt)
+        better = jnp.isfinite(rtn) & ((rtn < st.rn) | (rtn <= ftol))
+        on_b = same_branch(qt) | ~st.guard | ~same_branch(st.q)
+        crossed = st.crossed | (better & ~on_b)
+        accept = better & on_b
+        q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
+        mu = where(accept, where(st.mu > 1e-6, st.mu / 10.0, 0.0), jnp.maximum(10.0 * st.mu, 1e-3))
+        # Steps refused only for crossing the branch are not lack of progress: the damping
+        # is still shortening them towards this branch's root.
+        slow = where(accept & (rtn < 0.9 * st.rn), 0, where(better & ~on_b, st.slow, st.slow + 1))
+        stalled = (slow >= opts.patience) | (mu > 1e12 * jnp.maximum(small_max(jnp.sum(js * js, axis=0)), 1.0))
+        lift = stalled & st.guard & crossed
+        mu = where(lift, 0.0, mu)
+        slow = where(lift, 0, slow)
+        stalled = stalled & ~lift
+        dz, size = step(r, js, mu)
+        converged = (size <= xtol) & (rn <= ftol)
+        done = converged | stalled | ~jnp.isfinite(rn)
+        return _NewtonState(st.k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled, st.guard & ~lift, crossed)
+
+    inputs_ok = all_finite((u, p, guess))
+    zero = jnp.zeros((), dtype)
+    init = _NewtonState(
+        k=jnp.zeros((), jnp.int32), q=guess, r=jnp.zeros((m,), dtype), rn=jnp.asarray(jnp.inf, dtype), js=eye,
+        dz=jnp.zeros((m,), dtype), size=zero, mu=zero, slow=jnp.zeros((), jnp.int32), done=~inputs_ok,
+        stalled=jnp.asarray(False), guard=jnp.asarray(True), crossed=jnp.asarray(False),
+    )
+    st = jax.lax.while_loop(cond_fn, body, init)
+
+    cond = cond1(st.js, blocks(mech))
+    # Near a toggle the attainable accuracy of q is about cond * eps, not xtol: a closed
+    # residual whose next step is within that is converged (the band above cond_max is
+    # SINGULAR), so below the band the status does not hang on round-off or on the units.
+    eps = float(jnp.finfo(dtype).eps)
+    converged = (st.size <= jnp.maximum(xtol, 8.0 * eps * jnp.minimum(cond, cond_max))) & (st.rn <= ftol)
+    q = where(converged, st.q - st.dz * s, st.q)  # the last Newton step is free: it was computed already
+    finite = inputs_ok & jnp.isfinite(st.rn) & jnp.all(jnp.isfinite(q))
+    closed = st.rn <= ftol
+    status = where(
+        ~finite,
+        Status.NONFINITE,
+        where(
+            closed & ((cond > cond_max) | ~converged),
+            Status.SINGULAR,
+            where(converged, Status.CONVERGED, where(st.stalled, Status.INFEASIBLE, Status.MAX_STEPS)),
+        ),
+    ).astype(jnp.int32)
+    if mech.branch is not None:
+        branch = mech.branch_value(q, u, p)
+        status = where((status == Status.CONVERGED) & ~on_branch(b_guess, branch), Status.BRANCH, status).astype(jnp.int32)
+        flipped = where(status == Status.BRANCH, flipped_mask(b_guess, branch), 0)
+    else:
+        branch = jnp.asarray(jnp.nan, dtype)
+        flipped = jnp.zeros((), jnp.int32)
+    steps = jnp.maximum(st.k - 1, 0)
+    return q, status, steps, st.rn, cond, branch, flipped

@@ -1,0 +1,77 @@
+"""Position solves of batches of samples: ``solve`` (jit-compiled, vmapped) and ``solve_one``.
+
+Every sample is one damped Newton solve (``newton.newton``) from its guess, with its root
+attached to ``(u, p)`` by the implicit function theorem (``implicit.implicit_root``).
+Strokes, solved by continuation, are in ``continuation``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._linalg import where
+from .implicit import implicit_root
+from .inputs import batch_shape, prepare
+from .mechanism import Mechanism
+from .newton import newton
+from .options import SolverOptions
+from .solution import Solution, raise_if_failed
+from .status import Status
+
+__all__ = ["solve", "solve_one"]
+
+
+def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptions()) -> Solution:
+    """Solve ``Phi(q, u, p) = 0`` for one sample, differentiable in ``u`` and ``p``.
+
+    `u`: ``(dof,)``; `p`: mapping of scalars; `guess`: ``(m,)``, which selects the branch.
+    Returns a ``Solution`` with scalar status.  No checks: use ``solve`` from user code.
+    """
+    stop = jax.lax.stop_gradient
+    q_raw, status, steps, rn, cond, branch, flipped = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
+    ok = status == Status.CONVERGED
+    q_star = where(ok, q_raw, jnp.nan)
+    q = implicit_root(mech, q_star, ok, u, p)
+    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, flipped=flipped, coords=mech.coords, branches=mech.branches)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _solve_flat(mech, options, u, p, guess):
+    return jax.vmap(lambda u_, p_, g_: solve_one(mech, u_, p_, g_, options))(u, p, guess)
+
+
+def solve(mech: Mechanism, u, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), throw: bool = False) -> Solution:
+    """Solve the loop closure for a batch of inputs and designs (jit-compiled, vmapped).
+
+    **Arguments**
+
+    - `u`: driven inputs; array ``(..., dof)`` (or the bare batch array for one input), or a
+      dict ``{input_name: array}``.  Radians for angles, metres for lengths.
+    - `p`: ``{param_name: scalar or array}``; arrays broadcast against the batch.
+    - `guess`: ``(..., m)`` or ``{coord_name: array}``; picks the assembly branch.
+    - `options`: ``SolverOptions``.
+    - `throw`: raise ``RuntimeError`` if any sample did not converge (one bad sample raises
+      for the whole batch).
+
+    **Returns** a ``Solution`` whose fields have the broadcast batch shape in front;
+    differentiable in ``u`` and ``p`` by the implicit function theorem.
+
+    **Raises** ``ValueError`` for unknown names, bad values, shapes or dtypes (before tracing).
+    """
+    u, p, guess = prepare(mech, u, p, guess, options)
+    shape = batch_shape(mech, {"u": u.shape[:-1], "guess": guess.shape[:-1], **{f"p[{k!r}]": v.shape for k, v in p.items()}})
+    n = int(np.prod(shape, dtype=np.int64))
+    uf = jnp.broadcast_to(u, shape + u.shape[-1:]).reshape(n, -1)
+    gf = jnp.broadcast_to(guess, shape + guess.shape[-1:]).reshape(n, -1)
+    pf = {k: jnp.broadcast_to(v, shape).reshape(n) for k, v in p.items()}
+    sol = _solve_flat(mech, options, uf, pf, gf)
+    sol = jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), sol)
+    if throw:
+        raise_if_failed(sol)
+    return sol
