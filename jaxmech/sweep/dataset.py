@@ -158,7 +158,8 @@ def open_dataset(path, manifest: dict, chunk_size: int | None):
         old = json.loads(mpath.read_text(encoding="utf-8"))
         diff = [k for k in manifest if old.get(k) != manifest[k]]
         if diff:
-            what = "; ".join(f"{k}: {_short(old.get(k))} there, {_short(manifest[k])} now" for k in diff)
+            what = "; ".join("other design values" if k == "parameters_sha256" else
+                             f"{k}: {_short(old.get(k))} there, {_short(manifest[k])} now" for k in diff)
             raise ValueError(
                 f"{str(root)!r} holds a sweep made with other arguments ({what}); rerun with the same "
                 f"arguments to resume it, or give another output folder"

@@ -121,10 +121,10 @@ def reject(scene: Scene, params: dict[str, np.ndarray], offset: int = 0) -> dict
     for k, v in params.items():
         bad = ~np.isfinite(v)
         for i in np.flatnonzero(bad):
-            errors.setdefault(offset + int(i), f"rejected: parameter {k!r} = {v[i]!r} is not finite")
+            errors.setdefault(offset + int(i), f"rejected: parameter {k!r} = {float(v[i])!r} is not finite")
         if k in mech.lengths and k not in mech.signed:
             for i in np.flatnonzero(~bad & (v <= 0)):
-                errors.setdefault(offset + int(i), f"rejected: length {k!r} = {v[i]!r} must be positive")
+                errors.setdefault(offset + int(i), f"rejected: length {k!r} = {float(v[i])!r} must be positive")
     if scene.validate is not None:
         d = len(next(iter(params.values())))
         for i in range(d):

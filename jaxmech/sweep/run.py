@@ -331,10 +331,12 @@ def sweep_dataset(
     manifest = manifest_of(scene, params, figures=figures, points=points, options=options, anchors=anchors,
                            x64=bool(jax.config.jax_enable_x64))
     chunk, done, lost_before = open_dataset(out, manifest, chunk_size)
-    job = Job(points=points, options=options, anchors=anchors, figures=figures, chunk=0)
-    if client is None:
+    job = Job(points=points, options=options, anchors=anchors, figures=figures, chunk=chunk or 0)
+    devices = jax.device_count()
+    if chunk is not None and all(s in done for s in range(0, d, chunk)):
+        pass  # finished earlier: nothing to compile
+    elif client is None:
         job, _ = plan_chunk(scene, job, names, d, chunk, budget)
-        devices = jax.device_count()
     else:
         job, devices = _dask_job(client, scene, job, names, d, chunk, budget)
     write_manifest(out, manifest, job.chunk)
