@@ -5,7 +5,7 @@ jaxmech scenes
 jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR]
 jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.html]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
-jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ...] [--seed S] [--figures] --out DIR.parquet
+jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ...] [--seed S] [--figures [--figure NAME=MOD:FN]] --out DIR.parquet
 jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
 ```
 
@@ -193,6 +193,9 @@ def _parser() -> _Parser:
                    help="range of a parameter for --random (SI units); repeatable; default: every parameter within +-10%% of its default")
     s.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the random designs (default 0)")
     s.add_argument("--figures", action="store_true", help="one row per design: figures reduced over the stroke (needs --out DIR.parquet)")
+    s.add_argument("--figure", dest="figure_fns", action="append", metavar="NAME=MODULE:FUNCTION", default=[],
+                   help="with --figures, one more column NAME: FUNCTION(columns, p) -> scalar from an importable module "
+                   "(jax.numpy; see jaxmech.sweep.Figures); repeatable")
     s.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
     s.add_argument("--out", default=None, metavar="FILE",
                    help="output: FILE.csv, or DIR.parquet for a streamed, resumable dataset (default ./SCENE_sweep.csv, "
@@ -313,12 +316,34 @@ def _parse_ranges(items) -> dict[str, tuple[float, float]]:
     return out
 
 
+def _figure_functions(items) -> dict:
+    """``["peak[N m]=mymod:peak"]`` -> ``{"peak[N m]": mymod.peak}``; ``UsageError`` if it cannot be imported."""
+    import importlib
+
+    out = {}
+    for item in items or ():
+        name, sep, ref = item.partition("=")
+        mod, colon, fn = ref.partition(":")
+        if not sep or not name.strip() or not colon or not mod or not fn:
+            raise UsageError(f"--figure expects NAME=MODULE:FUNCTION, got {item!r}")
+        try:
+            obj = getattr(importlib.import_module(mod), fn)
+        except Exception as e:  # noqa: BLE001 - the user's module: any failure is one line
+            raise UsageError(f"--figure {name}: cannot import {ref!r} ({type(e).__name__}: {e})") from None
+        if not callable(obj):
+            raise UsageError(f"--figure {name}: {ref!r} is not a function")
+        out[name.strip()] = obj
+    return out
+
+
 def _sweep_out(args) -> Path:
     """The sweep's destination: checked (and the mode's needs) before anything is computed."""
     if args.random is None and not args.grid_values:
         raise UsageError("sweep needs at least one --grid NAME=START:STOP:N, or --random COUNT")
     if args.random is not None and args.grid_values:
         raise UsageError("give --grid or --random, not both")
+    if args.figure_fns and not args.figures:
+        raise UsageError("--figure adds a column to a figures sweep: give --figures too")
     if args.ranges and args.random is None:
         raise UsageError("--range is for --random designs; a grid takes --grid NAME=START:STOP:N")
     default = f"{args.scene}_figures.parquet" if args.figures else f"{args.scene}_sweep.csv"
@@ -339,7 +364,7 @@ def _cmd_sweep(args) -> int:
     unknown = [n for n in named if n not in scene.defaults]
     if unknown:
         raise UsageError(f"scene {scene.name!r} has no parameter(s) {unknown}; its parameters are: {', '.join(scene.defaults)}")
-    from .sweep import random_designs, sweep_dataset, sweep_scene  # imported only when sweeping
+    from .sweep import Figures, random_designs, sweep_dataset, sweep_scene  # imported only when sweeping
 
     if args.random is not None:
         box = ranges or {k: tuple(sorted((0.9 * v, 1.1 * v))) for k, v in scene.defaults.items() if v != 0}
@@ -347,9 +372,10 @@ def _cmd_sweep(args) -> int:
     else:
         designs = dict(grid=args.grid_values, table=None)
     out = args.out_path
+    figures = Figures(functions=_figure_functions(args.figure_fns)) if args.figures else None
     try:
         if out.suffix.lower() == ".parquet":
-            res = sweep_dataset(scene, out, **designs, figures=args.figures, points=args.points, chunk_size=args.chunk_size,
+            res = sweep_dataset(scene, out, **designs, figures=figures, points=args.points, chunk_size=args.chunk_size,
                                 progress=None if args.progress else False)
             print(res.line())
             return 0

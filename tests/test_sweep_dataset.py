@@ -23,7 +23,7 @@ import pytest  # noqa: E402
 from jaxmech import Status  # noqa: E402
 from jaxmech.cli import main  # noqa: E402
 from jaxmech.scenes.classic import FOURBAR  # noqa: E402
-from jaxmech.sweep import grid, random_designs, sweep_dataset, sweep_scene  # noqa: E402
+from jaxmech.sweep import Figures, grid, random_designs, sweep_dataset, sweep_scene  # noqa: E402
 
 from helpers import fourbar_closed  # noqa: E402
 
@@ -36,6 +36,15 @@ GRID = {"a": [0.9, 1.0, 1.1], "c": [1.0, 2.5, 3.0]}
 # The random sweep of the kill test: about a third of the designs (c < ~2) fail somewhere.
 RANGES = {"a": (0.9, 1.1), "c": (1.0, 3.0)}
 N_RANDOM, SEED = 1200, 7
+
+
+def final_rocker(cols, p):
+    """A user figure: the rocker angle at the end of the stroke (rad).  Module-level, so
+    the command line imports it (``--figure``) and every sweep here shares one kernel."""
+    return cols["theta4[rad]"][-1]
+
+
+FIGURES = Figures(functions={"final_theta4[rad]": final_rocker})
 
 
 def _table_with_rejected():
@@ -61,7 +70,7 @@ def _assert_same_dataset(x, y):
 def figures_and_traces(tmp_path_factory):
     root = tmp_path_factory.mktemp("ds")
     table = _table_with_rejected()
-    s_fig = sweep_dataset(FOURBAR, root / "f.parquet", table=table, figures=True, points=POINTS, chunk_size=CHUNK, progress=False)
+    s_fig = sweep_dataset(FOURBAR, root / "f.parquet", table=table, figures=FIGURES, points=POINTS, chunk_size=CHUNK, progress=False)
     s_tr = sweep_dataset(FOURBAR, root / "t.parquet", table=table, points=POINTS, chunk_size=CHUNK, progress=False)
     return table, s_fig, _read(root / "f.parquet"), s_tr, _read(root / "t.parquet")
 
@@ -83,7 +92,7 @@ def test_figures_against_closed_form_and_failed_rows_kept(figures_and_traces):
         assert f["failed_points[-]"][i] == bad.sum()
         if bad.any():  # the first failing sample's status, figures NaN
             assert p["c"] == 1.0 and f["status[-]"][i] == status[i][np.argmax(bad)] == Status.INFEASIBLE
-            assert np.isnan(f["theta4_travel[rad]"][i]) and np.isnan(f["transmission_angle_min[rad]"][i])
+            assert np.isnan(f["theta4_travel[rad]"][i]) and np.isnan(f["final_theta4[rad]"][i])
             continue
         # Independent truth: the closed-form open assembly at the same samples.
         t3, t4 = (np.asarray(x) for x in fourbar_closed(th2, p["a"], p["b"], p["c"], p["d"]))
@@ -92,6 +101,7 @@ def test_figures_against_closed_form_and_failed_rows_kept(figures_and_traces):
         assert abs(f["theta4_min[rad]"][i] - t4.min()) < CLOSED_TOL
         assert abs(f["theta4_travel[rad]"][i] - (t4.max() - t4.min())) < CLOSED_TOL
         assert abs(f["transmission_angle_min[rad]"][i] - mu.min()) < CLOSED_TOL
+        assert abs(f["final_theta4[rad]"][i] - t4[-1]) < CLOSED_TOL
         # the positions: samples where the closed form reaches its extreme (ties at 0 and 2 pi)
         for at, truth, best in ((f["theta4_max_at[rad]"][i], t4, t4.max()), (f["theta4_min_at[rad]"][i], t4, t4.min()),
                                 (f["transmission_angle_min_at[rad]"][i], mu, mu.min())):
@@ -127,6 +137,7 @@ def test_trace_dataset_equals_the_sweep_in_memory(figures_and_traces):
 def _cli_args(out):
     ranges = [f"--range={k}={lo}:{hi}" for k, (lo, hi) in RANGES.items()]
     return ["sweep", "fourbar", "--random", str(N_RANDOM), "--seed", str(SEED), *ranges, "--figures",
+            "--figure", "final_theta4[rad]=test_sweep_dataset:final_rocker",
             "--points", str(POINTS), "--chunk-size", str(CHUNK), "--out", str(out)]
 
 
@@ -134,13 +145,13 @@ def _cli_args(out):
 def uninterrupted(tmp_path_factory):
     out = tmp_path_factory.mktemp("ref") / "ref.parquet"
     table = random_designs(RANGES, N_RANDOM, seed=SEED)
-    sweep_dataset(FOURBAR, out, table=table, figures=True, points=POINTS, chunk_size=CHUNK, progress=False)
+    sweep_dataset(FOURBAR, out, table=table, figures=FIGURES, points=POINTS, chunk_size=CHUNK, progress=False)
     return _read(out)
 
 
 def test_killed_sweep_resumes_to_the_uninterrupted_dataset(uninterrupted, tmp_path):
     out = tmp_path / "killed.parquet"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "tests")])}
     cmd = [sys.executable, "-m", "jaxmech.cli", *_cli_args(out)]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     n_chunks = -(-N_RANDOM // CHUNK)
@@ -174,7 +185,7 @@ def test_dask_cluster_writes_the_same_dataset(uninterrupted, tmp_path):
     table = random_designs(RANGES, N_RANDOM, seed=SEED)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
-        s = sweep_dataset(FOURBAR, out, table=table, figures=True, points=POINTS, chunk_size=CHUNK, client=client, progress=False)
+        s = sweep_dataset(FOURBAR, out, table=table, figures=FIGURES, points=POINTS, chunk_size=CHUNK, client=client, progress=False)
     assert s.info["backend"] == "dask" and s.chunks_written == -(-N_RANDOM // CHUNK) and not s.lost
     _assert_same_dataset(_read(out), uninterrupted)
 
@@ -182,13 +193,13 @@ def test_dask_cluster_writes_the_same_dataset(uninterrupted, tmp_path):
 def test_rerun_with_other_arguments_is_refused(tmp_path, capsys):
     out = tmp_path / "s.parquet"
     table = _table_with_rejected()
-    sweep_dataset(FOURBAR, out, table=table, figures=True, points=POINTS, chunk_size=CHUNK, progress=False)
+    sweep_dataset(FOURBAR, out, table=table, figures=FIGURES, points=POINTS, chunk_size=CHUNK, progress=False)
     with pytest.raises(ValueError, match=r"other arguments \(points: 41 there, 51 now\)"):
-        sweep_dataset(FOURBAR, out, table=table, figures=True, points=51, chunk_size=CHUNK)
+        sweep_dataset(FOURBAR, out, table=table, figures=FIGURES, points=51, chunk_size=CHUNK)
     with pytest.raises(ValueError, match="other design values"):
-        sweep_dataset(FOURBAR, out, table={**table, "c": table["c"] + 0.1}, figures=True, points=POINTS)
+        sweep_dataset(FOURBAR, out, table={**table, "c": table["c"] + 0.1}, figures=FIGURES, points=POINTS)
     with pytest.raises(ValueError, match="chunks of 16 designs"):
-        sweep_dataset(FOURBAR, out, table=table, figures=True, points=POINTS, chunk_size=8)
+        sweep_dataset(FOURBAR, out, table=table, figures=FIGURES, points=POINTS, chunk_size=8)
     # The command line says it in one line (exit 2), as every user mistake.
     assert main(["sweep", "fourbar", "--grid", "a=1:2:3", "--figures", "--points", "51", "--out", str(out)]) == 2
     assert "other arguments" in capsys.readouterr().err
@@ -200,6 +211,8 @@ def test_rerun_with_other_arguments_is_refused(tmp_path, capsys):
     (["--random", "5", "--range", "a=2:1"], "need finite LOW <= HIGH"),
     (["--grid", "a=1:2:3", "--range", "a=1:2"], "--range is for --random"),
     (["--random", "5", "--range", "zz=1:2", "--out", "x.parquet"], "has no parameter(s) ['zz']"),
+    (["--random", "5", "--figures", "--figure", "f=no_such_module:f", "--out", "x.parquet"], "--figure f: cannot import"),
+    (["--random", "5", "--figure", "f=math:cos", "--out", "x.parquet"], "give --figures too"),
 ])  # fmt: skip
 def test_cli_sweep_mistakes_are_one_line(args, match, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)

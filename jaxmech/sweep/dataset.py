@@ -119,7 +119,7 @@ def manifest_of(scene, params: dict, *, figures, points: int, options, anchors: 
     digest = hashlib.sha256()
     for k, v in params.items():
         digest.update(k.encode())
-        digest.update(np.ascontiguousarray(v, np.float64).tobytes())
+        digest.update(memoryview(np.ascontiguousarray(v, np.float64)))
     fig = None if figures is None else {
         "columns": None if figures.columns is None else list(figures.columns),
         "reductions": list(figures.reductions),

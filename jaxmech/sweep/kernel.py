@@ -249,8 +249,8 @@ def _run_kernel(scene: Scene, job: Job, params: dict[str, np.ndarray]):
     out = compiled({k: jax.device_put(v, sharding) for k, v in padded.items()})
     if job.outputs == "vmap":
         cols, status = out
-        cols = {k: np.array(v[:n]) for k, v in cols.items()}  # writable host copies
-        return in_scene_order(scene, job.figures, cols), np.array(status[:n])
+        cols = {k: np.asarray(v)[:n].copy() for k, v in cols.items()}  # writable host copies
+        return in_scene_order(scene, job.figures, cols), np.asarray(status)[:n].copy()
     mo = jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], out)
     return _outputs_per_design(scene, job, mo, {k: v[:n] for k, v in padded.items()})
 
