@@ -13,8 +13,11 @@ then times the sweep itself (``run_s``); throughput is designs x positions / ``r
 The load average is recorded before and after every case: the machine may be shared.
 
 Run: ``python -m benchmarks.sweep_scale [--quick] [--figures D] [--trace D] [--baseline D]``
-(defaults 1e7, 1e6, 1e5: about 40 minutes on 2 idle cores); writes
-``results/sweep_scale.json``.  The datasets go to a temporary folder, deleted afterwards.
+(defaults 1e7, 1e6, 1e5: about 40 minutes on 2 idle cores); ``--probe D --probe-s S``
+replaces the full figures run by a D-design figures sweep killed S seconds after its first
+chunk (peak RSS with the whole design table loaded, throughput over the window); ``--trace
+0`` skips the trace case.  Writes ``results/<name>.json`` (``--name``, default
+``sweep_scale``).  The datasets go to a temporary folder, deleted afterwards.
 """
 
 from __future__ import annotations
@@ -88,6 +91,43 @@ def run_case(mode: str, d: int) -> dict:
     return row
 
 
+def _vm_hwm_mb(pid: int) -> float:
+    """Peak resident memory of a running process (Linux ``VmHWM``), MiB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def run_probe(d: int, seconds: float) -> dict:
+    """A figures sweep of ``d`` designs run for ``seconds`` after its first chunk file, then
+    killed (SIGKILL): its peak RSS with the whole design table loaded, and its throughput
+    over the window from the chunk files written (a full run is resumable from there)."""
+    folder = tempfile.mkdtemp(prefix="sweep_scale_probe_")
+    out = Path(folder) / "run.parquet"
+    try:
+        load0 = os.getloadavg()
+        proc = subprocess.Popen([sys.executable, "-m", "benchmarks.sweep_scale", "--child", "figures", str(d), folder],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        while proc.poll() is None and not (out.exists() and any(out.glob("part-*.parquet"))):
+            time.sleep(0.05)
+        t1, n1 = time.perf_counter(), len(list(out.glob("part-*.parquet")))
+        time.sleep(seconds)
+        t2, n2 = time.perf_counter(), len(list(out.glob("part-*.parquet")))
+        hwm = _vm_hwm_mb(proc.pid)
+        proc.kill()
+        proc.wait()
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    row = {"mode": "figures_probe", "designs": d, "positions": POINTS, "chunk_size": CHUNK, "window_s": t2 - t1,
+           "chunks_in_window": n2 - n1, "designs_x_positions_per_s": (n2 - n1) * CHUNK * POINTS / (t2 - t1),
+           "peak_rss_mb": hwm, "designs_done_when_killed": n2 * CHUNK,
+           "load_average_before": list(load0), "load_average_after": list(os.getloadavg())}
+    print(f"   probe D={d:>9}: {row['designs_x_positions_per_s']:.3g} design-positions/s over {row['window_s']:.0f} s, "
+          f"peak RSS {hwm:.0f} MiB, load {row['load_average_after'][0]:.2f}", flush=True)
+    return row
+
+
 def main(argv=None):
     if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--child":
         print(json.dumps(_child(sys.argv[2], int(sys.argv[3]), sys.argv[4])))
@@ -96,18 +136,24 @@ def main(argv=None):
     ap.add_argument("--figures", type=int, default=10**7, metavar="D", help="designs of the figures sweep (default 1e7)")
     ap.add_argument("--trace", type=int, default=10**6, metavar="D", help="designs of the trace sweep (default 1e6)")
     ap.add_argument("--baseline", type=int, default=10**5, metavar="D", help="designs of the in-memory sweep_scene baseline (default 1e5)")
+    ap.add_argument("--name", default="sweep_scale", help="results/NAME.json")
+    ap.add_argument("--probe", type=int, default=0, metavar="D", help="instead of the full figures run: D designs for --probe-s seconds, then killed")
+    ap.add_argument("--probe-s", type=float, default=60.0, metavar="S", help="seconds the probe runs (default 60)")
     args = ap.parse_args(argv)
     if args.quick:
         args.figures, args.trace, args.baseline = 10**4, 10**4, 10**4
     t0 = time.perf_counter()
-    rows = [run_case("memory", args.baseline), run_case("figures", args.figures), run_case("trace", args.trace)]
+    rows = [run_case("memory", args.baseline)]
+    rows.append(run_probe(args.probe, args.probe_s) if args.probe else run_case("figures", args.figures))
+    if args.trace:
+        rows.append(run_case("trace", args.trace))
     base = rows[0]["designs_x_positions_per_s"]
     payload = {
         "points": POINTS, "rows": rows,
         "throughput_ratio_vs_in_memory": {r["mode"]: r["designs_x_positions_per_s"] / base for r in rows[1:]},
         "total_s": time.perf_counter() - t0,
     }
-    path = write_result("sweep_scale", payload, out_dir=args.out)
+    path = write_result(args.name, payload, out_dir=args.out)
     print(f"wrote {path} in {payload['total_s']:.0f} s")
 
 

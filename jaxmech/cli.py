@@ -377,7 +377,8 @@ def _cmd_sweep(args) -> int:
         if out.suffix.lower() == ".parquet":
             res = sweep_dataset(scene, out, **designs, figures=figures, points=args.points, chunk_size=args.chunk_size,
                                 progress=None if args.progress else False)
-            print(res.line())
+            if not (args.progress and sys.stderr.isatty()):  # else the progress display ended with it
+                print(res.line())
             return 0
         res = sweep_scene(scene, **designs, points=args.points, chunk_size=args.chunk_size, progress=None if args.progress else False)
     except ValueError as e:
