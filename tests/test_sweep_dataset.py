@@ -207,6 +207,11 @@ def test_rerun_with_other_arguments_is_refused(tmp_path, capsys):
     assert "other arguments" in capsys.readouterr().err
 
 
+def test_unknown_figure_column_is_refused_before_compiling(figures_and_traces, tmp_path):
+    with pytest.raises(ValueError, match=r"has no column\(s\) \['theta9\[rad\]'\]; its columns are: t\[s\]"):
+        sweep_dataset(FOURBAR, tmp_path / "x.parquet", {"a": [1.0]}, figures=Figures(columns=["theta9[rad]"]), points=POINTS)
+
+
 @pytest.mark.parametrize("args, match", [
     (["--grid", "a=1:2:3", "--random", "5"], "--grid or --random, not both"),
     (["--random", "5", "--figures", "--out", "x.csv"], "--figures writes a Parquet dataset"),

@@ -178,7 +178,7 @@ class Figures:
         object.__setattr__(self, "functions", items)
 
     def check(self, scene: Scene, column_names: Sequence[str]) -> None:
-        """``ValueError`` naming the unknown columns (before anything is compiled)."""
+        """``ValueError`` naming the unknown columns (raised while tracing, before XLA compiles)."""
         if self.columns is None:
             return
         unknown = [c for c in self.columns if c not in column_names]
@@ -198,6 +198,7 @@ def stroke_figures(scene: Scene, figures: Figures, cols: dict, status, p, xp=jnp
     samples); every figure is NaN unless all samples converged.  `xp` is ``jax.numpy``
     (in the kernel) or ``numpy`` (outputs evaluated design by design).
     """
+    figures.check(scene, list(cols))
     ok_all = xp.all(status == Status.CONVERGED)
     uname = scene.mechanism.inputs[0]
     u = cols[f"{uname}[{scene.units[uname]}]"]
