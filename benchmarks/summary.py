@@ -173,6 +173,21 @@ def design_table(doc) -> str:
     return "\n".join(lines).rstrip()
 
 
+def sweep_scale_table(doc) -> str:
+    lines = ["### Sweeps streamed to Parquet (`benchmarks/sweep_scale.py`)", "", _machine(doc), "",
+             f"Four-bar random crank-rockers x {doc.get('points', '?')} positions, each case in a fresh process "
+             "(`memory`: `sweep_scene`, every column in host memory; `figures`/`trace`: `sweep_dataset`):", "",
+             "| mode | designs | run (s) | designs x positions / s | vs memory | peak RSS (MB) | rows written | dataset (MB) | load after |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    ratio = doc.get("throughput_ratio_vs_in_memory") or {}
+    for r in doc["rows"]:
+        lines.append(f"| {r['mode']} | {_f(r.get('designs'), '{:,}')} | {_f(r.get('run_s'), '{:.1f}')} | "
+                     f"{_f(r.get('designs_x_positions_per_s'), '{:,.0f}')} | {_f(ratio.get(r['mode'], 1.0), '{:.2f}')} | "
+                     f"{_f(r.get('peak_rss_mb'), '{:,.0f}')} | {_f(r.get('rows_written'), '{:,}')} | "
+                     f"{_f((r.get('dataset_bytes') or 0) / 2**20, '{:,.0f}')} | {_f((r.get('load_average_after') or [None])[0], '{:.1f}')} |")
+    return "\n".join(lines)
+
+
 def flap_torque_table(doc) -> str:
     drive = doc.get("drive") or {}
     drive_s = (f"crank {drive.get('alpha_start_deg')} → {drive.get('alpha_end_deg')} deg at {drive.get('alpha_dot_rad_s')} rad/s, "
@@ -217,7 +232,7 @@ def flap_torque_table(doc) -> str:
 
 
 TABLES = {"kinematics": kinematics_table, "speed_error": speed_error_table, "scaling": scaling_table,
-          "dynamics": dynamics_table, "design": design_table, "flap_torque": flap_torque_table}
+          "dynamics": dynamics_table, "design": design_table, "sweep_scale": sweep_scale_table, "flap_torque": flap_torque_table}
 
 
 def render(results: Path = RESULTS) -> str:

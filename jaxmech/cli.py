@@ -5,6 +5,7 @@ jaxmech scenes
 jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR]
 jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.html]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
+jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ...] [--seed S] [--figures [--figure NAME=MOD:FN]] --out DIR.parquet
 jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
 ```
 
@@ -179,14 +180,28 @@ def _parser() -> _Parser:
 
     s = sub.add_parser(
         "sweep",
-        help="sweep a scene over a grid of parameters to CSV",
-        description="Run SCENE for every design on the grid (the product of the --grid axes) and write one CSV, with a progress bar.",
+        help="sweep a scene over a grid or random designs to CSV or a Parquet dataset",
+        description="Run SCENE for every design on the grid (the product of the --grid axes) or for COUNT random "
+        "designs (--random), and write one CSV, or, with --out DIR.parquet, a Parquet dataset streamed chunk by chunk "
+        "(bounded memory; rerun the same command to resume an interrupted sweep). --figures keeps a few numbers "
+        "per design (max, its position, min, its position, travel of every column; status) instead of every sample.",
     )
     s.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
     s.add_argument("--grid", action="append", metavar="NAME=START:STOP:N", default=[], help="a parameter axis: N values from START to STOP (SI units); repeatable")
+    s.add_argument("--random", type=_positive("--random"), default=None, metavar="COUNT", help="COUNT random designs, uniform in the --range box")
+    s.add_argument("--range", dest="ranges", action="append", metavar="NAME=LOW:HIGH", default=[],
+                   help="range of a parameter for --random (SI units); repeatable; default: every parameter within +-10%% of its default")
+    s.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the random designs (default 0)")
+    s.add_argument("--figures", action="store_true", help="one row per design: figures reduced over the stroke (needs --out DIR.parquet)")
+    s.add_argument("--figure", dest="figure_fns", action="append", metavar="NAME=MODULE:FUNCTION", default=[],
+                   help="with --figures, one more column NAME: FUNCTION(columns, p) -> scalar from an importable module "
+                   "(jax.numpy; see jaxmech.sweep.Figures); repeatable")
     s.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
-    s.add_argument("--out", default=None, metavar="FILE", help="output CSV (default ./SCENE_sweep.csv)")
+    s.add_argument("--out", default=None, metavar="FILE",
+                   help="output: FILE.csv, or DIR.parquet for a streamed, resumable dataset (default ./SCENE_sweep.csv, "
+                   "./SCENE_figures.parquet with --figures)")
     s.add_argument("--chunk-size", type=_positive("--chunk-size"), default=None, metavar="K", help="designs per compiled batch (default: the sweep's own)")
+    s.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar (it is shown only on a terminal anyway)")
 
     rep = sub.add_parser(
         "report",
@@ -281,25 +296,97 @@ def _cmd_animate(args) -> int:
     return 0
 
 
+def _parse_ranges(items) -> dict[str, tuple[float, float]]:
+    """``["a=0.9:1.1"]`` -> ``{"a": (0.9, 1.1)}``; ``UsageError`` if malformed."""
+    out: dict[str, tuple[float, float]] = {}
+    for item in items or ():
+        name, sep, rng = item.partition("=")
+        name, parts = name.strip(), rng.split(":")
+        if not sep or not name or len(parts) != 2:
+            raise UsageError(f"--range expects NAME=LOW:HIGH, got {item!r}")
+        try:
+            lo, hi = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise UsageError(f"--range {name}: LOW and HIGH must be numbers, got {rng!r}") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and hi >= lo):
+            raise UsageError(f"--range {name}: need finite LOW <= HIGH, got {rng!r}")
+        if name in out:
+            raise UsageError(f"--range {name} is given twice")
+        out[name] = (lo, hi)
+    return out
+
+
+def _figure_functions(items) -> dict:
+    """``["peak[N m]=mymod:peak"]`` -> ``{"peak[N m]": mymod.peak}``; ``UsageError`` if it cannot be imported."""
+    import importlib
+
+    out = {}
+    for item in items or ():
+        name, sep, ref = item.partition("=")
+        mod, colon, fn = ref.partition(":")
+        if not sep or not name.strip() or not colon or not mod or not fn:
+            raise UsageError(f"--figure expects NAME=MODULE:FUNCTION, got {item!r}")
+        try:
+            obj = getattr(importlib.import_module(mod), fn)
+        except Exception as e:  # noqa: BLE001 - the user's module: any failure is one line
+            raise UsageError(f"--figure {name}: cannot import {ref!r} ({type(e).__name__}: {e})") from None
+        if not callable(obj):
+            raise UsageError(f"--figure {name}: {ref!r} is not a function")
+        out[name.strip()] = obj
+    return out
+
+
+def _sweep_out(args) -> Path:
+    """The sweep's destination: checked (and the mode's needs) before anything is computed."""
+    if args.random is None and not args.grid_values:
+        raise UsageError("sweep needs at least one --grid NAME=START:STOP:N, or --random COUNT")
+    if args.random is not None and args.grid_values:
+        raise UsageError("give --grid or --random, not both")
+    if args.figure_fns and not args.figures:
+        raise UsageError("--figure adds a column to a figures sweep: give --figures too")
+    if args.ranges and args.random is None:
+        raise UsageError("--range is for --random designs; a grid takes --grid NAME=START:STOP:N")
+    default = f"{args.scene}_figures.parquet" if args.figures else f"{args.scene}_sweep.csv"
+    out = Path(args.out or default)
+    if out.suffix.lower() == ".parquet":
+        _check_writable_dir(out, "--out")
+    elif args.figures:
+        raise UsageError(f"--figures writes a Parquet dataset: give --out DIR.parquet, got {str(out)!r}")
+    else:
+        _check_writable_file(out, "--out")
+    return out
+
+
 def _cmd_sweep(args) -> int:
     scene = _scene(args.scene)
-    grid = args.grid_values
-    unknown = [n for n in grid if n not in scene.defaults]
+    ranges = _parse_ranges(args.ranges)
+    named = {**args.grid_values, **ranges}
+    unknown = [n for n in named if n not in scene.defaults]
     if unknown:
         raise UsageError(f"scene {scene.name!r} has no parameter(s) {unknown}; its parameters are: {', '.join(scene.defaults)}")
-    from .sweep import sweep_scene  # written separately; imported only when sweeping
+    from .sweep import Figures, random_designs, sweep_dataset, sweep_scene  # imported only when sweeping
 
-    out = Path(args.out) if args.out else Path(f"{scene.name}_sweep.csv")
+    if args.random is not None:
+        box = ranges or {k: tuple(sorted((0.9 * v, 1.1 * v))) for k, v in scene.defaults.items() if v != 0}
+        designs = dict(grid=None, table=random_designs(box, args.random, seed=args.seed))
+    else:
+        designs = dict(grid=args.grid_values, table=None)
+    out = args.out_path
+    figures = Figures(functions=_figure_functions(args.figure_fns)) if args.figures else None
     try:
-        res = sweep_scene(scene, grid=grid, points=args.points, chunk_size=args.chunk_size, progress=True)
+        if out.suffix.lower() == ".parquet":
+            res = sweep_dataset(scene, out, **designs, figures=figures, points=args.points, chunk_size=args.chunk_size,
+                                progress=None if args.progress else False)
+            if not (args.progress and sys.stderr.isatty()):  # else the progress display ended with it
+                print(res.line())
+            return 0
+        res = sweep_scene(scene, **designs, points=args.points, chunk_size=args.chunk_size, progress=None if args.progress else False)
     except ValueError as e:
         raise UsageError(str(e)) from None
     out.parent.mkdir(parents=True, exist_ok=True)
     res.to_csv(out)
-    if callable(getattr(res, "summary", None)):
-        print(res.summary())
-    n = int(np.prod([len(v) for v in grid.values()]))
-    print(f"wrote {out} ({n} designs)")
+    print(res.summary())
+    print(f"wrote {out} ({res.n_designs} designs)")
     return 0
 
 
@@ -352,14 +439,14 @@ def main(argv=None) -> int:
         # Syntax first (no JAX touched for a mistyped command line), then float64 and the cache.
         args.overrides = _parse_set(getattr(args, "sets", None))
         args.grid_values = _parse_grid(getattr(args, "grid", None))
-        if args.verb == "sweep" and not args.grid_values:
-            raise UsageError("sweep needs at least one --grid NAME=START:STOP:N")
+        if args.verb == "sweep":
+            args.out_path = _sweep_out(args)
         if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".html"):
             raise UsageError(f"--out must end in .gif or .html, got {args.out!r}")
         # Destinations are checked before anything is computed.
         if args.verb in ("run", "report"):
             _check_writable_dir(Path(args.out), "--out")
-        elif args.verb in ("animate", "sweep") and args.out:
+        elif args.verb == "animate" and args.out:
             _check_writable_file(Path(args.out), "--out")
         _setup_jax()
         return _VERBS[args.verb](args)

@@ -1,0 +1,393 @@
+"""Running a sweep: chunks on the local devices or as Dask tasks, gathered in memory
+(``sweep_scene``) or streamed to a Parquet dataset (``sweep_dataset``), with a progress
+bar and a one-line summary.
+
+Both entry points walk the same chunks through the same kernel (``kernel.run_chunk``):
+locally one after another, or with a Dask ``client`` as independent tasks.  A chunk
+whose run raises stops nothing else: its designs are kept as failed rows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..scenes.base import Scene
+from ..options import SolverOptions
+from ..status import Status
+from .dataset import ChunkReport, Dataset, manifest_of, open_dataset, write_manifest, written_counts
+from .designs import design_table
+from .evaluate import Figures, design_status
+from .kernel import (
+    ChunkData, Job, bytes_per_design_estimate, default_budget, lost_chunk, outputs_mode, plan_chunk, run_chunk,
+)
+from .result import SweepResult
+
+__all__ = ["SweepSummary", "sweep_dataset", "sweep_scene"]
+
+
+# =========================================================================== chunks
+def chunk_task(scene_ref, figures_ref, job: Job, start: int, params, x64: bool, cache_dir, dataset: Dataset | None):
+    """One chunk, locally or on a Dask worker: run it and either return its arrays or
+    write its file and return a ``ChunkReport``.  On a worker the task itself switches
+    float64 on (and the client's persistent compilation cache): a worker process does not
+    inherit the client's JAX configuration.  The scene and the figures come by name or
+    as scattered objects, so every task on a worker hits the same compiled kernel."""
+    if x64 and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+    if cache_dir and jax.config.jax_compilation_cache_dir != cache_dir:
+        jax.config.update("jax_compilation_cache_dir", cache_dir)
+    if isinstance(scene_ref, str):
+        from ..scenes import get_scene
+
+        scene_ref = get_scene(scene_ref)
+    data = run_chunk(scene_ref, dataclasses.replace(job, figures=figures_ref), start, params)
+    return data if dataset is None else dataset.write(data)
+
+
+def _local_chunks(scene, job, params, starts, dataset):
+    d = len(next(iter(params.values())))
+    for s in starts:
+        part = {k: v[s:s + job.chunk] for k, v in params.items()}
+        try:
+            yield s, min(s + job.chunk, d), chunk_task(scene, job.figures, job, s, part, False, None, dataset)
+        except Exception as exc:  # noqa: BLE001 - a failed chunk stops nothing else
+            yield s, min(s + job.chunk, d), exc
+
+
+def _dask_chunks(client, scene, job, params, starts, dataset, timeout):
+    import distributed
+
+    d = len(next(iter(params.values())))
+    try:
+        from ..scenes import get_scene
+
+        registered = get_scene(scene.name) is scene
+    except ValueError:
+        registered = False
+    # A registered scene travels by name; any other (and figures with user functions) is
+    # scattered once, so that every task on a worker sees the same object.
+    scene_ref = scene.name if registered else client.scatter(scene, broadcast=True)
+    figures_ref = job.figures if job.figures is None or not job.figures.functions else client.scatter(job.figures, broadcast=True)
+    x64, cache_dir = bool(jax.config.jax_enable_x64), jax.config.jax_compilation_cache_dir
+    futures = {}
+    for s in starts:
+        part = {k: v[s:s + job.chunk] for k, v in params.items()}
+        fut = client.submit(chunk_task, scene_ref, figures_ref, dataclasses.replace(job, figures=None), s, part, x64, cache_dir,
+                            dataset, pure=False)
+        futures[fut] = (s, min(s + job.chunk, d))
+    finished = set()
+    try:
+        for fut in distributed.as_completed(list(futures), timeout=timeout):
+            finished.add(fut)
+            s, e = futures[fut]
+            try:
+                yield s, e, fut.result()
+            except Exception as exc:  # noqa: BLE001 - a failed chunk stops nothing else
+                yield s, e, exc
+    except TimeoutError:  # the remaining chunks are lost below
+        pass
+    for fut, (s, e) in futures.items():
+        if fut not in finished:
+            fut.cancel()
+            yield s, e, TimeoutError(f"not finished within timeout={timeout} s")
+
+
+def _dask_job(client, scene, job, names, d, chunk_size, budget):
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+    if chunk_size is None:
+        # Enough tasks to balance the workers, each within the per-worker memory budget.
+        per = bytes_per_design_estimate(scene, job, names)
+        chunk_size = max(1, min(-(-d // (4 * n_workers)), 1024, int(budget // per)))
+    return dataclasses.replace(job, chunk=min(int(chunk_size), d), outputs=outputs_mode(scene, job, names)), n_workers
+
+
+def _prepare(scene, points, chunk_size, memory_budget, who):
+    if isinstance(scene, str):
+        from ..scenes import get_scene
+
+        scene = get_scene(scene)
+    if not isinstance(scene, Scene):
+        raise ValueError(f"{who}: scene must be a Scene or a scene name, got {type(scene).__name__}")
+    if points < 2:
+        raise ValueError(f"{who}: points must be at least 2, got {points}")
+    if chunk_size is not None and chunk_size < 1:
+        raise ValueError(f"{who}: chunk_size must be positive, got {chunk_size}")
+    if memory_budget is not None and not memory_budget > 0:
+        raise ValueError(f"{who}: memory_budget must be a positive number of bytes, got {memory_budget}")
+    return scene, float(memory_budget) if memory_budget is not None else default_budget()
+
+
+def _figures(figures) -> Figures | None:
+    if figures is None or figures is False:
+        return None
+    if figures is True:
+        return Figures()
+    if not isinstance(figures, Figures):
+        raise ValueError(f"figures must be None, True or a Figures(...), got {type(figures).__name__}")
+    return figures
+
+
+# =========================================================================== progress
+def _progress_bar(label: str, total: int, done: int, show: bool | None):
+    """tqdm on stderr with rate and ETA; ``show=None``: only when stderr is a terminal."""
+    from tqdm import tqdm
+
+    on = sys.stderr.isatty() if show is None else bool(show)
+    return tqdm(total=total, initial=done, desc=label, unit="design", unit_scale=total >= 10**5, file=sys.stderr,
+                disable=not on, mininterval=0.5, smoothing=0.1, dynamic_ncols=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepSummary:
+    """How a streamed sweep went (``sweep_dataset``'s return value).
+
+    - `path`: the dataset folder; `designs`: designs in the sweep; `counts`: ``{status
+      name: designs}`` over the whole dataset (a design's status: its first failing
+      sample's, ``CONVERGED`` when none failed).
+    - `rows_written`, `chunks_written`: this run; `chunks_skipped`: already written by an
+      earlier run (resumed); `lost`: ``{first design: message}`` of the chunks whose run
+      failed in this run (kept as failed rows; a rerun retries them).
+    - `seconds`: wall time of this run; `info`: chunk size, chunks, backend, devices, mode.
+    """
+
+    path: str
+    designs: int
+    counts: dict
+    rows_written: int
+    chunks_written: int
+    chunks_skipped: int
+    lost: dict
+    seconds: float
+    info: dict
+
+    def line(self) -> str:
+        """The one-line summary printed at the end of a sweep."""
+        return summary_line(self.info.get("label", "sweep"), self.designs, self.counts, self.seconds,
+                            f"{self.rows_written} rows written to {self.path}"
+                            + (f", {self.chunks_skipped} chunks already there" if self.chunks_skipped else "")
+                            + (f", {len(self.lost)} chunks lost (rerun to retry)" if self.lost else ""))
+
+
+def summary_line(label: str, designs: int, counts: dict, seconds: float, tail: str) -> str:
+    ok = counts.get(Status.CONVERGED.name, 0)
+    failed = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if k != Status.CONVERGED.name) or "none"
+    return f"{label}: {designs} designs, {ok} converged, failed: {failed}; {seconds:.1f} s; {tail}"
+
+
+# =========================================================================== in memory
+def sweep_scene(
+    scene,
+    grid: Mapping[str, Any] | None = None,
+    *,
+    table: Mapping[str, Any] | None = None,
+    points: int = 101,
+    chunk_size: int | None = None,
+    memory_budget: float | None = None,
+    progress: bool | None = None,
+    client=None,
+    options: SolverOptions = SolverOptions(),
+    anchors: int = 256,
+    timeout: float | None = None,
+) -> SweepResult:
+    """Run a scene for a batch of designs, each over its whole stroke, in one call; every
+    table column of every design is gathered in host memory (``D x N x columns x 8``
+    bytes: for large sweeps stream figures or traces to disk with ``sweep_dataset``).
+
+    Per design the computation is ``run_scene``'s (same stroke, drive, continuation and
+    columns); the designs are vmapped through one compiled kernel, in chunks.
+
+    **Arguments**
+
+    - `scene`: a ``Scene`` or a registered scene name.
+    - `grid`: ``{name: 1-D values}``, a full-factorial grid (see ``grid``); parameters not
+      named keep the scene's defaults (SI units).
+    - `table`: ``{name: (D,) values}``, an explicit list of designs (e.g. ``random_designs``).
+      Neither: the default design alone.
+    - `points`: samples along the stroke, both ends included.
+    - `chunk_size`: designs per compiled chunk (rounded up to a multiple of the device
+      count).  Default: the most that fits `memory_budget`, at most 1024 per device on a
+      CPU and 65536 per device on an accelerator.
+    - `memory_budget`: bytes of device memory a chunk may use (arguments, results and
+      temporaries, from the compiled kernel's memory analysis).  Default: a quarter of the
+      device memory (or of the free host memory on a CPU).  The gathered results on the
+      host come on top.
+    - `progress`: ``True``/``False`` to force the progress bar (tqdm, stderr: rate and
+      ETA) and the summary line; ``None``: shown when stderr is a terminal.
+    - `client`: a ``distributed.Client``: chunks become Dask tasks (each worker runs the
+      same kernel, with float64 enabled when it is enabled here).  A chunk whose task
+      fails or exceeds `timeout` stops nothing else: its designs are kept with status
+      ``NONFINITE`` and the reason in ``errors``.
+    - `options`, `anchors`: solver settings, as for ``solve_stroke``.
+    - `timeout`: seconds to wait for the Dask tasks (``None``: no limit).
+
+    **Returns** a ``SweepResult``.
+
+    **Raises** ``ValueError`` for unknown parameter names, ragged tables or bad settings
+    (before any tracing).  Per-design value problems (a non-positive length, a
+    ``scene.validate`` refusal) do not raise: those designs are kept and reported.
+    """
+    scene, budget = _prepare(scene, points, chunk_size, memory_budget, "sweep_scene")
+    params = design_table(scene, grid, table)
+    d = len(next(iter(params.values())))
+    names = tuple(params)
+    t0 = time.perf_counter()
+    job = Job(points=points, options=options, anchors=anchors, figures=None, chunk=0)
+    if client is None:
+        job, per = plan_chunk(scene, job, names, d, chunk_size, budget)
+        devices, chunks = jax.device_count(), None
+    else:
+        job, devices = _dask_job(client, scene, job, names, d, chunk_size, budget)
+        per = float("nan")
+    starts = list(range(0, d, job.chunk))
+    chunks = _local_chunks(scene, job, params, starts, None) if client is None else _dask_chunks(client, scene, job, params, starts, None, timeout)
+    cols = status = None
+    errors: dict[int, str] = {}
+    first_exc = None
+    bar = _progress_bar(f"sweep {scene.name}", d, 0, progress)
+    shown = not bar.disable
+    with bar:
+        for s, e, res in chunks:
+            if isinstance(res, BaseException):
+                first_exc = first_exc or res
+                errors.update(lost_chunk(job, (), s, {k: v[s:e] for k, v in params.items()}, res).errors)
+            else:
+                if cols is None:
+                    cols = {k: np.full((d, points), np.nan, v.dtype) for k, v in res.columns.items()}
+                    status = np.full((d, points), int(Status.NONFINITE), np.int32)
+                for k, v in res.columns.items():
+                    cols[k][s:e] = v
+                status[s:e] = res.status
+                errors.update(res.errors)
+            bar.update(e - s)
+    if cols is None:
+        raise RuntimeError(f"sweep_scene: every chunk failed; first error: {type(first_exc).__name__}: {first_exc}") from first_exc
+    seconds = time.perf_counter() - t0
+    if shown:
+        counts = {Status(int(c)).name: int(n) for c, n in zip(*np.unique(design_status(status, np), return_counts=True))}
+        print(summary_line(f"sweep {scene.name}", d, counts, seconds, f"{d * points} rows in memory"), file=sys.stderr)
+    info = dict(chunk_size=job.chunk, n_chunks=len(starts), devices=devices, bytes_per_design=per, seconds=seconds,
+                backend="local" if client is None else "dask", outputs=job.outputs)
+    return SweepResult(scene=scene.name, params=params, columns=cols, status=status, errors=dict(sorted(errors.items())), info=info)
+
+
+# =========================================================================== streamed
+def sweep_dataset(
+    scene,
+    out,
+    grid: Mapping[str, Any] | None = None,
+    *,
+    table: Mapping[str, Any] | None = None,
+    figures: Figures | bool | None = None,
+    points: int = 101,
+    chunk_size: int | None = None,
+    memory_budget: float | None = None,
+    progress: bool | None = None,
+    client=None,
+    options: SolverOptions = SolverOptions(),
+    anchors: int = 256,
+    timeout: float | None = None,
+) -> SweepSummary:
+    """Run a sweep of any size in bounded memory, streaming it to a Parquet dataset.
+
+    Each chunk of designs is written to its own file in folder `out` as soon as it is
+    finished (by the Dask worker that ran it, with a `client`: the folder must then be
+    on a file system the workers share), so host memory holds one chunk, whatever the
+    number of designs.  Rerun with the same arguments after an interruption (a kill, a
+    crash, a lost worker) and the chunks already written are skipped: the dataset ends
+    identical to an uninterrupted run's (same rows, none lost or repeated).  The layout
+    and the columns are described in ``jaxmech.sweep.dataset``; read it back with
+    ``pyarrow.parquet.read_table(out)`` or ``pandas.read_parquet(out)``, without jaxmech.
+
+    **Arguments** as ``sweep_scene``, and:
+
+    - `out`: the dataset folder (conventionally ``NAME.parquet``); made if missing.
+    - `figures`: ``None`` (trace mode: one row per design and stroke sample, every table
+      column), ``True`` (figures mode with the default ``Figures()``: one row per design,
+      the max, its position, the min, its position and the travel of every non-drive
+      column) or a ``Figures``: reductions computed inside the compiled kernel.
+    - `progress`: the progress bar (rate, ETA) and the summary line on stderr; ``None``:
+      when stderr is a terminal.
+
+    **Returns** a ``SweepSummary`` (``.line()`` is the one-line summary).
+
+    **Raises** ``ValueError`` for bad arguments (as ``sweep_scene``), when `out` is a file,
+    or when it holds a sweep made with other arguments (it names them).  Failed designs
+    are rows with their status (and, if never solved, an ``error`` message), never dropped.
+    """
+    scene, budget = _prepare(scene, points, chunk_size, memory_budget, "sweep_dataset")
+    figures = _figures(figures)
+    params = design_table(scene, grid, table, who="sweep_dataset")
+    d = len(next(iter(params.values())))
+    names = tuple(params)
+    t0 = time.perf_counter()
+    manifest = manifest_of(scene, params, figures=figures, points=points, options=options, anchors=anchors,
+                           x64=bool(jax.config.jax_enable_x64))
+    chunk, done, lost_before = open_dataset(out, manifest, chunk_size)
+    job = Job(points=points, options=options, anchors=anchors, figures=figures, chunk=chunk or 0)
+    devices = jax.device_count()
+    if chunk is not None and all(s in done for s in range(0, d, chunk)):
+        pass  # finished earlier: nothing to compile
+    elif client is None:
+        job, _ = plan_chunk(scene, job, names, d, chunk, budget)
+    else:
+        job, devices = _dask_job(client, scene, job, names, d, chunk, budget)
+    write_manifest(out, manifest, job.chunk)
+    dataset = Dataset(path=str(out), figures=figures is not None, points=points)
+    starts = [s for s in range(0, d, job.chunk) if s not in done]
+    counts: dict[str, int] = {}
+    for f in done.values():
+        for k, v in written_counts(f).items():
+            counts[k] = counts.get(k, 0) + v
+    skipped_designs = sum(min(job.chunk, d - s) for s in done)
+    chunks = _local_chunks(scene, job, params, starts, dataset) if client is None else _dask_chunks(client, scene, job, params, starts, dataset, timeout)
+    label = f"sweep {scene.name}"
+    rows = written = 0
+    lost: dict[int, BaseException] = {}
+    names_out = None
+    bar = _progress_bar(label, d, skipped_designs, progress)
+    shown = not bar.disable
+    with bar:
+        for s, e, res in chunks:
+            if isinstance(res, BaseException):
+                lost[s] = res
+            else:
+                names_out = names_out or res.names
+                rows, written = rows + res.rows, written + 1
+                for k, v in res.counts.items():
+                    counts[k] = counts.get(k, 0) + v
+            bar.update(e - s)
+    lost_msgs = {}
+    if lost:
+        if names_out is None and not done:
+            first = next(iter(lost.values()))
+            raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
+        if names_out is None:
+            import pyarrow.parquet as pq
+
+            skip = {"design", "point", *names, "status[-]", "error"}
+            names_out = tuple(n for n in pq.read_schema(next(iter(done.values()))).names if n not in skip)
+            if figures is not None:  # failed_points[-] is a result column, written after status[-]
+                names_out = tuple(n for n in names_out if n != "failed_points[-]") + ("failed_points[-]",)
+        dtype = np.dtype(jnp.result_type(float))
+        for s, exc in sorted(lost.items()):
+            part = {k: v[s:s + job.chunk] for k, v in params.items()}
+            rep: ChunkReport = dataset.write(lost_chunk(job, names_out, s, part, exc, dtype), lost=True)
+            rows += rep.rows
+            counts[Status.NONFINITE.name] = counts.get(Status.NONFINITE.name, 0) + rep.designs
+            lost_msgs[s] = next(iter(rep.errors.values()))
+    info = dict(label=label, chunk_size=job.chunk, n_chunks=-(-d // job.chunk), devices=devices, outputs=job.outputs,
+                backend="local" if client is None else "dask", mode="trace" if figures is None else "figures",
+                retried_lost=len(lost_before))
+    summary = SweepSummary(path=str(out), designs=d, counts=counts, rows_written=rows, chunks_written=written + len(lost),
+                           chunks_skipped=len(done), lost=lost_msgs, seconds=time.perf_counter() - t0, info=info)
+    if shown:
+        print(summary.line(), file=sys.stderr)
+    return summary
