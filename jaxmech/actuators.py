@@ -27,6 +27,8 @@ from .mechanism import Vars
 __all__ = [
     "Spec",
     "resolve",
+    "spec_names",
+    "parameter_names",
     "DCMotor",
     "ScrewJack",
     "HydraulicCylinder",
@@ -53,6 +55,28 @@ def resolve(spec: Spec, p: Mapping):
     if callable(spec):
         return spec(p if isinstance(p, Vars) else Vars(p))
     return spec
+
+
+def spec_names(*specs) -> tuple[str, ...]:
+    """The parameter names among ``specs`` (those given as strings), in order, once each."""
+    return tuple(dict.fromkeys(s for s in specs if isinstance(s, str)))
+
+
+def parameter_names(actuator) -> tuple[str, ...]:
+    """The parameters an actuator declares: every name its specs give, in field order.
+
+    A motor built as ``DCMotor("R_a", "K_m")`` declares ``R_a`` and ``K_m``: a model that
+    uses it accepts them in ``p`` without listing them anywhere else.  A name the
+    mechanism or the model declares too is the same parameter (merged by name).
+    ``()`` for ``None`` or an object that is not an actuator dataclass.  An actuator whose
+    specs are not all used in every configuration says which are by a ``used_specs()``
+    method (``SMAWire``: the transformation temperatures only with a temperature).
+    """
+    if actuator is None or not dataclasses.is_dataclass(actuator):
+        return ()
+    if hasattr(actuator, "used_specs"):
+        return spec_names(*actuator.used_specs())
+    return spec_names(*(getattr(actuator, f.name) for f in dataclasses.fields(actuator)))
 
 
 # --------------------------------------------------------------------------- DC motor
@@ -255,6 +279,13 @@ class SMAWire:
             raise ValueError("SMAWire: give a martensite `fraction` or a wire `temperature` (or a constitutive `law`)")
         if self.law is not None and not callable(self.law):
             raise ValueError("SMAWire: `law` must be a function law(strain, p) -> stress in Pa")
+
+    def used_specs(self) -> tuple:
+        """The specs this wire reads (see ``parameter_names``)."""
+        if self.law is not None:
+            return self.area, self.length0, self.prestrain
+        heat = (self.temperature, self.A_s, self.A_f) if self.fraction is None else (self.fraction,)
+        return self.area, self.length0, self.E_M, self.E_A, self.prestrain, *heat
 
     def martensite_fraction(self, p):
         """Martensite fraction ``xi`` in [0, 1] (-)."""

@@ -47,9 +47,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .actuators import DCMotor, Spec, resolve
+from .actuators import DCMotor, Spec, parameter_names, resolve, spec_names
 from .kinematics import chain_rule, time_derivatives
-from .mechanism import Mechanism, Vars
+from .mechanism import Mechanism, Vars, check_parameters
 from ._linalg import cond1, solve_small
 from .continuation import stroke
 from .solve import SolverOptions, as_coords, as_inputs, implicit_root, solve, solve_one, tolerances
@@ -224,20 +224,48 @@ class Model:
     - `mechanism`: the ``Mechanism``.
     - `bodies`: sequence of ``Body``.
     - `loads`: sequence of ``PointForce``, ``Moment``, ``Gravity``, ``Axial``, ``Potential``.
+    - `params`: the model's own parameters: masses, inertias, load coefficients, anything
+      no constraint uses.  They are not the mechanism's: the mechanism declares only what
+      its constraints and points need.  Bodies and loads may use the mechanism's
+      parameters too (a chord length), by name.
+    - `actuators`: actuators the model is driven or loaded with (a ``DCMotor``); each
+      declares the parameters its specs name (``actuators.parameter_names``), as does
+      every actuator used as an ``Axial`` law.
 
-    **Raises** ``ValueError`` for an unknown point, coordinate or parameter name, or a body
-    with inertia but no angle.
+    A model's parameters (``parameters``) are the mechanism's, then its own, then its
+    actuators', merged by name: one ``p`` mapping carries them all, and each function
+    takes from it what it uses.
+
+    **Raises** ``ValueError`` for an unknown point, coordinate or parameter name, a body
+    with inertia but no angle, or a clash: a parameter declared both by the mechanism and
+    in `params`, or a parameter named like a coordinate or input.
     """
 
     mechanism: Mechanism
     bodies: Sequence[Body] = ()
     loads: Sequence = ()
+    params: Sequence[str] = ()
+    actuators: Sequence = ()
 
     def __post_init__(self):
         object.__setattr__(self, "bodies", tuple(self.bodies))
         object.__setattr__(self, "loads", tuple(self.loads))
+        object.__setattr__(self, "params", (self.params,) if isinstance(self.params, str) else tuple(self.params))
+        object.__setattr__(self, "actuators", tuple(self.actuators))
         mech = self.mechanism
         names = mech.coords + mech.inputs
+        for n in self.params:
+            if not isinstance(n, str) or not n.isidentifier():
+                raise ValueError(f"params: {n!r} is not a valid name (use Python identifiers)")
+            if n in mech.params:
+                raise ValueError(f"params: {n!r} is declared by both the mechanism {mech.name!r} and the model; "
+                                 f"declare it once (the model uses the mechanism's parameters by name)")
+        if len(set(self.params)) != len(self.params):
+            raise ValueError(f"params: duplicate names in {self.params}")
+        for n in self.parameters:
+            if n in names:
+                raise ValueError(f"parameter {n!r} has the name of a coordinate or input of {mech.name!r}; rename it")
+        known = self.parameters
 
         def check_point(spec, what):
             if isinstance(spec, str) and spec not in mech.points:
@@ -250,8 +278,9 @@ class Model:
                 raise ValueError(f"{what}: unknown coordinate or input {spec!r}; known: {list(names)}")
 
         def check_spec(spec, what):
-            if isinstance(spec, str) and spec not in mech.params:
-                raise ValueError(f"{what}: unknown parameter {spec!r}; {mech.name} has parameters {list(mech.params)}")
+            if isinstance(spec, str) and spec not in known:
+                raise ValueError(f"{what}: unknown parameter {spec!r}; the model's parameters are {list(known)} "
+                                 f"(declare a model parameter in Model(params=...))")
 
         for b in self.bodies:
             if not isinstance(b, Body):
@@ -275,6 +304,25 @@ class Model:
                 check_point(ld.b, f"load {ld.name!r}")
             elif isinstance(ld, Gravity):
                 check_spec(ld.g, f"load {ld.name!r}")
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """Every parameter name of the model: the mechanism's, its own (`params`), then those
+        its actuators and actuator laws declare, once each."""
+        laws = [ld.law for ld in self.loads if isinstance(ld, Axial)]
+        acts = [n for a in (*self.actuators, *laws) for n in parameter_names(a)]
+        return tuple(dict.fromkeys(self.mechanism.params + self.params + tuple(acts)))
+
+    def check_params(self, p: Mapping, extra: Sequence[str] = ()) -> None:
+        """Eager checks of a parameter mapping against ``parameters`` (and the `extra` names
+        a call adds: a motor's, a voltage's); raises ``ValueError`` naming the parameter.
+
+        Names: none missing, none unknown.  Values where concrete: finite, and the
+        mechanism's own checks (positive lengths) on its parameters.
+        """
+        mech = self.mechanism
+        names = tuple(dict.fromkeys(self.parameters + tuple(extra)))
+        check_parameters(mech.name, p, names, mech.lengths, mech.signed, whose="this model's")
 
 
 # --------------------------------------------------------------------------- evaluation helpers
@@ -516,9 +564,15 @@ def _id_batch(model, quasi_static, options, u, ud, udd, p, t, guess):
     return jax.vmap(lambda *a: _id_one(model, quasi_static, *a, options))(u, ud, udd, p, t, guess)
 
 
-def _prep_p(model: Model, p, dtype):
-    model.mechanism.check_params(p)
-    return {k: jnp.asarray(p[k], dtype) for k in model.mechanism.params}
+def _prep_p(model: Model, p, dtype, extra: Sequence[str] = ()):
+    """Checked parameters as arrays of ``dtype``: the model's and the call's `extra` names."""
+    model.check_params(p, extra)
+    return {k: jnp.asarray(p[k], dtype) for k in dict.fromkeys(model.parameters + tuple(extra))}
+
+
+def _mechanism_params(model: Model, p):
+    """The mechanism's share of a checked model parameter mapping (for its position solves)."""
+    return {k: p[k] for k in model.mechanism.params}
 
 
 def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=0.0, quasi_static: bool = False,
@@ -591,8 +645,9 @@ def inverse_dynamics(model: Model, drive, t, p: Mapping, guess, *, quasi_static:
     if t.ndim != 1:
         raise ValueError(f"t must be a 1-D array of times, got shape {t.shape}")
     us = jax.vmap(drive)(t)
+    model.check_params(p)
     # positions, dq/du and d2q/du2 in one compiled pass; the drive's chain rule gives the rates
-    sol, d1, d2 = stroke(model.mechanism, us, p, guess, options, derivs=True, anchors=anchors)
+    sol, d1, d2 = stroke(model.mechanism, us, _mechanism_params(model, p), guess, options, derivs=True, anchors=anchors)
     dtype = sol.q.dtype
     pj = _prep_p(model, p, dtype)
     tt = t.astype(dtype)
@@ -785,7 +840,7 @@ def equilibrium(model: Model, p: Mapping, bounds, guess, *, u0=None, applied: Sp
     lo, hi = (as_inputs(mech, jnp.asarray(b), "bounds") for b in bounds)
     guess = as_coords(mech, guess)
     dtype = jnp.result_type(lo, hi, guess, float)
-    pj = _prep_p(model, p, dtype)
+    pj = _prep_p(model, p, dtype, spec_names(applied))
     u0 = 0.5 * (lo + hi) if u0 is None else as_inputs(mech, jnp.asarray(u0), "u0")
     t = jnp.asarray(t, dtype)
     shape = np.broadcast_shapes(lo.shape[:-1], hi.shape[:-1], u0.shape[:-1], guess.shape[:-1], t.shape,
@@ -1067,14 +1122,15 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     ud0 = as_inputs(mech, jnp.asarray(u_dot0), "u_dot0")
     guess = as_coords(mech, guess)
     dtype = jnp.result_type(u0, ud0, guess, float)
-    pj = _prep_p(model, p, dtype)
+    pj = _prep_p(model, p, dtype, parameter_names(motor) + spec_names(voltage))
     parts = [u0.astype(dtype), ud0.astype(dtype)]
     if motor is not None and motor.inductance is not None:
         parts.append(jnp.reshape(jnp.asarray(current0, dtype), (1,)))
     y0 = jnp.concatenate(parts)
     # The jitted batch solve (compiled once per mechanism and options); a dict of scalars
     # is a batch of shape ().
-    sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, pj, guess.astype(dtype), options=options)
+    sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, _mechanism_params(model, pj),
+                guess.astype(dtype), options=options)
     if stroke is None:
         lo = jnp.full((mech.dof,), -jnp.inf, dtype)
         hi = jnp.full((mech.dof,), jnp.inf, dtype)
