@@ -1082,10 +1082,16 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     ``M(u) u_ddot + h(u, u_dot, t) = tau_load + tau_motor`` where ``M`` is ``mass_matrix``
     and ``h`` the inverse-dynamics force at zero input acceleration (for one input
     ``h = (1/2) M'(u) u_dot^2 - Q``); with an inductive motor the state also holds the
-    current, ``L di/dt = v - R i - n K w``.  Every stage closes the loop (Newton from the
-    step's start) and the stage equations are solved by simplified Newton, attached to the
-    parameters by ``jax.lax.custom_root``: the whole run is differentiable in ``p``,
-    ``u0``, ``u_dot0`` and ``h``.
+    current, ``L di/dt = v - R i - n K w``.  Every stage closes the loop (a fixed number of
+    Newton steps from the step's start, attached to ``(u, p)`` by ``solve.implicit_root``),
+    and the stage equations ``Z = h A F(y + Z)`` are solved by simplified Newton (one
+    iteration matrix per step, from a finite-difference Jacobian) and attached to their
+    arguments by a custom JVP (the implicit function theorem on the stage equations:
+    ``dZ = -G_Z^{-1} G_args dargs``).  No derivative goes through an iteration, and the
+    whole run is differentiable, forward and reverse mode, in ``p``, ``u0``, ``u_dot0``
+    and ``h``: see ``docs/forward_dynamics_gradients.md`` and the notebook
+    ``notebooks/forward_dynamics_gradients.ipynb`` (a final angle's gradient in a mass,
+    a length and the motor voltage, checked against finite differences).
 
     **Arguments**
 
@@ -1094,7 +1100,9 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     - `h`: step (s); `steps`: number of steps (static); `t0`: start time (s).
     - `method`: one of ``METHODS``.
     - `motor`: a ``DCMotor`` on input `motor_input` (default the first); `voltage`: spec of
-      its voltage, a parameter name, a number, or ``fn(t, p) -> V``; `current0` (A).
+      its voltage, a parameter name, a number, or ``fn(t, p) -> V``; `current0` (A).  The
+      parameters the motor's specs name, and a voltage's name, belong in `p` alongside the
+      model's (``Model.parameters``) without being declared anywhere else.
     - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``
       (arrays; ``p`` a dict), e.g. a controller or a prescribed torque.
     - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
