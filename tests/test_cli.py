@@ -255,6 +255,7 @@ def test_sweep_writes_one_row_per_design_and_point(tmp_path):
     head, data = read_csv(out)
     for col in ("a", "d", *FOURBAR_COLUMNS):
         assert col in head
+    assert head[-len(FOURBAR_COLUMNS):] == FOURBAR_COLUMNS  # the order `jaxmech run` writes
     assert data.shape[0] == 4 * N
     a, d = data[:, head.index("a")], data[:, head.index("d")]
     assert sorted({(x, y) for x, y in zip(a, d)}) == [(0.9, 3.4), (0.9, 3.6), (1.1, 3.4), (1.1, 3.6)]
