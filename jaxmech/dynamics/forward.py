@@ -18,8 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._linalg import solve_small
-from ..actuators import DCMotor, parameter_names, spec_names
-from ..mechanism import Vars
+from ..actuators import DCMotor, parameter_names
 from ..solve import SolverOptions, as_coords, as_inputs, solve
 from ..status import Status
 from .closure import close_loop
@@ -67,6 +66,8 @@ class Trajectory:
     - `status`: ``DynStatus`` of the run (scalar); `t_stop`: time of the last valid state.
       Rows after a stop are NaN; with ``STROKE_END`` the first state past the end is kept.
     - `newton`: simplified-Newton iterations of each step ``(N,)``.
+    - `states`: every actuator's states ``(N+1, k)`` in the order of the run's actuators
+      (the motor first): a motor's current (A), a cylinder's pressure (Pa)...
     """
 
     t: jax.Array
@@ -77,6 +78,7 @@ class Trajectory:
     status: jax.Array
     t_stop: jax.Array
     newton: jax.Array
+    states: jax.Array
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,8 +88,9 @@ class Integrator:
 
     - `model`: the ``Model``; `method`: one of ``METHODS``; `steps`: number of steps.
     - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``, or None.
-    - `motor`: a ``DCMotor`` or None, on input number `motor_input`; `voltage`: its voltage
-      spec (a parameter name, a number or ``fn(t, p) -> V``).
+    - `actuators`: ``((input index, actuator), ...)``, each a ``StatefulActuator``
+      (``jaxmech.actuators``: a ``DCMotor`` with its voltage, an ``OilCylinder``...); their
+      states follow ``(u, u_dot)`` in the state vector, in this order.
     - `close_iters`: Newton steps that close the loop at each stage (``close_loop``).
     - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment) and budget.
     """
@@ -96,29 +99,17 @@ class Integrator:
     method: str = "radau5"
     steps: int = 1
     load: Callable | None = None
-    motor: DCMotor | None = None
-    voltage: object = None
-    motor_input: int = 0
+    actuators: tuple = ()
     close_iters: int = 5
     newton_tol: float = 1e-12
     newton_max: int = 12
-
-
-def _voltage(spec, t, p):
-    if isinstance(spec, str):
-        return p[spec]
-    if callable(spec):
-        return spec(t, Vars(p))
-    return spec
-
 
 
 def rhs(integ: Integrator, p, t, y, qg):
     """``y' = f(t, y)`` with ``y = (u, u_dot, [i])``: ``M u_ddot = tau - h(u, u_dot, t)``
     (and ``di/dt`` with an inductive motor), the loop closed near ``qg`` (``close_loop``).
     NaN where the loop cannot be closed.  `p`: the parameter mapping (arrays)."""
-    model, load, motor, voltage = integ.model, integ.load, integ.motor, integ.voltage
-    k_in, iters = integ.motor_input, integ.close_iters
+    model, load, iters = integ.model, integ.load, integ.close_iters
     mech = model.mechanism
     dof = mech.dof
     u, ud = y[:dof], y[dof : 2 * dof]
@@ -130,17 +121,15 @@ def rhs(integ: Integrator, p, t, y, qg):
     tau = jnp.zeros_like(u)
     if load is not None:
         tau = tau + jnp.reshape(load(t, q, u, ud, p), (dof,))
-    di = []
-    if motor is not None:
-        v = _voltage(voltage, t, p)
-        if motor.inductance is None:
-            tau = tau.at[k_in].add(motor.steady_torque(v, ud[k_in], p))
-        else:
-            i = y[2 * dof]
-            tau = tau.at[k_in].add(motor.torque(i, p))
-            di = [motor.current_rate(i, v, ud[k_in], p)]
+    # Each actuator: its force on its input, and the rates of its own states (StatefulActuator).
+    rates, at = [], 2 * dof
+    for k_in, act in integ.actuators:
+        state = y[at : at + act.n_states]
+        at += act.n_states
+        tau = tau.at[k_in].add(act.force(state, u[k_in], ud[k_in], t, p))
+        rates.append(jnp.reshape(jnp.asarray(act.rate(state, u[k_in], ud[k_in], t, p), y.dtype), (act.n_states,)))
     udd = solve_small(M, tau - hvec)
-    f = jnp.concatenate([ud, udd, jnp.reshape(jnp.asarray(di, y.dtype), (-1,))])
+    f = jnp.concatenate([ud, udd, *rates])
     return jnp.where(ok, f, jnp.nan)
 
 
@@ -263,7 +252,7 @@ _integrate_jit = jax.jit(integrate, static_argnums=0)
 
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
                      motor: DCMotor | None = None, voltage=None, current0=0.0, motor_input: str | None = None,
-                     load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
+                     actuators: Mapping | None = None, load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
                      newton_tol: float = 1e-12, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
     """Integrate the equations of motion in the inputs, with fixed steps (one design).
 
@@ -291,6 +280,9 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
       its voltage, a parameter name, a number, or ``fn(t, p) -> V``; `current0` (A).  The
       parameters the motor's specs name, and a voltage's name, belong in `p` alongside the
       model's (``Model.parameters``) without being declared anywhere else.
+    - `actuators`: ``{input name: actuator}``, further ``StatefulActuator``s (an
+      ``OilCylinder``...), each on its input, with states of their own started at their
+      ``initial_state(p)``; their parameters join `p` like the motor's.
     - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``
       (arrays; ``p`` a dict), e.g. a controller or a prescribed torque.
     - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
@@ -305,23 +297,34 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     mech = model.mechanism
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
-    if motor is not None and voltage is None:
+    if motor is not None and voltage is None and motor.voltage is None:
         raise ValueError("a motor needs a voltage: a parameter name, a number or fn(t, p) -> V")
     if int(steps) < 1:
         raise ValueError(f"steps must be at least 1, got {steps}")
-    k_in = 0
-    if motor_input is not None:
-        if motor_input not in mech.inputs:
+    acts = []  # (input index, actuator), the motor first
+    if motor is not None:
+        if motor_input is not None and motor_input not in mech.inputs:
             raise ValueError(f"motor_input {motor_input!r} is not an input; inputs are {list(mech.inputs)}")
-        k_in = mech.inputs.index(motor_input)
+        k_in = 0 if motor_input is None else mech.inputs.index(motor_input)
+        acts.append((k_in, motor if voltage is None else dataclasses.replace(motor, voltage=voltage)))
+    for name, act in (actuators or {}).items():
+        if name not in mech.inputs:
+            raise ValueError(f"actuators: {name!r} is not an input; inputs are {list(mech.inputs)}")
+        if not all(hasattr(act, a) for a in ("n_states", "initial_state", "force", "rate")):
+            raise ValueError(f"actuators[{name!r}]: {type(act).__name__} is not a StatefulActuator "
+                             f"(n_states, initial_state, force, rate)")
+        acts.append((mech.inputs.index(name), act))
     u0 = as_inputs(mech, jnp.asarray(u0), "u0")
     ud0 = as_inputs(mech, jnp.asarray(u_dot0), "u_dot0")
     guess = as_coords(mech, guess)
     dtype = jnp.result_type(u0, ud0, guess, float)
-    pj = prepare_params(model, p, dtype, parameter_names(motor) + spec_names(voltage))
+    pj = prepare_params(model, p, dtype, tuple(n for _, a in acts for n in parameter_names(a)))
     parts = [u0.astype(dtype), ud0.astype(dtype)]
-    if motor is not None and motor.inductance is not None:
-        parts.append(jnp.reshape(jnp.asarray(current0, dtype), (1,)))
+    for i, (_, act) in enumerate(acts):
+        if act.n_states == 0:
+            continue
+        x0 = jnp.asarray(current0, dtype) if (i == 0 and motor is not None) else jnp.asarray(act.initial_state(pj), dtype)
+        parts.append(jnp.reshape(x0, (act.n_states,)))
     y0 = jnp.concatenate(parts)
     # The jitted batch solve (compiled once per mechanism and options); a dict of scalars
     # is a batch of shape ().
@@ -332,12 +335,12 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
         hi = jnp.full((mech.dof,), jnp.inf, dtype)
     else:
         lo, hi = (jnp.broadcast_to(jnp.asarray(b, dtype), (mech.dof,)) for b in stroke)
-    integ = Integrator(model, method, int(steps), load, motor, voltage, k_in, int(close_iters), float(newton_tol),
-                       int(newton_max))
+    integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters), float(newton_tol), int(newton_max))
     ys, qs, status, t_stop, its = _integrate_jit(integ, pj, jnp.asarray(t0, dtype), jnp.asarray(h, dtype), y0, sol.q, lo, hi)
     status = jnp.where(sol.status == Status.CONVERGED, status, DynStatus.POSITION).astype(jnp.int32)
     dof = mech.dof
     t = jnp.asarray(t0, dtype) + jnp.asarray(h, dtype) * jnp.arange(int(steps) + 1, dtype=dtype)
-    return Trajectory(t=t, u=ys[:, :dof], u_dot=ys[:, dof:2 * dof], current=ys[:, 2 * dof:], q=qs, status=status,
-                      t_stop=t_stop, newton=its)
+    n_motor = acts[0][1].n_states if motor is not None else 0
+    return Trajectory(t=t, u=ys[:, :dof], u_dot=ys[:, dof:2 * dof], current=ys[:, 2 * dof:2 * dof + n_motor], q=qs,
+                      status=status, t_stop=t_stop, newton=its, states=ys[:, 2 * dof:])
 
