@@ -26,6 +26,7 @@ TOL_STATIC = 1e-12  # equilibrium angle (rad): a linear equation, Newton's round
 TOL_RK = 1e-9  # Radau IIA (order 5) at w h = 0.05 over 1.5 periods: measured 2e-10 (5e-9 at w h = 0.1, ~h^5)
 TOL_ID = 1e-9  # inverse-dynamics torque of the free motion (N m; torques are ~1 N m)
 RTOL_GRAD = 1e-9  # implicit derivative of the equilibrium against its closed form
+RTOL_FD_GRAD = 1e-7  # a run's gradient (reverse mode) against its closed form: measured 3e-9 (integration error)
 
 HINGE = jm.Mechanism(name="hinge", coords=(), inputs=("theta",), params=("c",), lengths=("c",),
                      points={"G": lambda q, u, p: p.c * jm.cis(u.theta)})
@@ -106,3 +107,23 @@ def test_model_parameters_merge_by_name_and_clash_clearly():
         D.equilibrium(MODEL, {**P, "k": np.float64("nan")}, (-1.0, 2.0), ())
     with pytest.raises(ValueError, match="length 'c' must be positive, got -1.0"):
         D.equilibrium(MODEL, {**P, "c": np.float64(-1.0)}, (-1.0, 2.0), ())
+
+
+def test_forward_dynamics_gradient_in_reverse_mode_against_the_closed_form():
+    """``jax.grad`` through a whole run: ``theta(T) = theta* (1 - cos w T)`` with
+    ``theta* = theta0 + M0/k`` and ``w = sqrt(k / (J + m c^2))`` differentiated by hand in a
+    stiffness, a mass and a length."""
+    h, steps = 0.05 / W, 190
+    T = h * steps
+
+    def final(x):
+        return D.forward_dynamics(MODEL, {**P, **x}, 0.0, 0.0, (), h=h, steps=steps).u[-1, 0]
+
+    g = jax.grad(final)({k: P[k] for k in ("k", "m", "c")})
+    k, m, c, J_O = P["k"], P["m"], P["c"], P["J"] + P["m"] * P["c"] ** 2
+    swing = THETA_STAR * np.sin(W * T) * T  # d theta(T) / d w
+    want = {"k": -P["M0"] / k**2 * (1 - np.cos(W * T)) + swing * W / (2 * k),
+            "m": swing * (-W / (2 * J_O)) * c**2,
+            "c": swing * (-W / (2 * J_O)) * 2 * m * c}
+    for name, value in want.items():
+        assert abs(float(g[name]) - value) <= RTOL_FD_GRAD * abs(value), (name, float(g[name]), value)
