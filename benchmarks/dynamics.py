@@ -123,7 +123,7 @@ def bench_inverse(model, p, guess0, n, repeats):
     pj = {k: jnp.broadcast_to(jnp.asarray(v, jnp.float64), (n,)) for k, v in p.items()}
     args = (jnp.asarray(u)[:, None], jnp.asarray(ud)[:, None], jnp.asarray(udd)[:, None], pj, jnp.zeros(n), guess)
     t0 = time.perf_counter()
-    compiled = D._id_batch.lower(model, False, SolverOptions(), *args).compile()
+    compiled = D.inverse_dynamics_batch.lower(model, False, SolverOptions(), *args).compile()
     compile_s = time.perf_counter() - t0
     out = compiled(*args)
     ok = np.asarray(out[3]) == 0
@@ -140,9 +140,9 @@ def reference_solution(model, p, motor, t_end, guess):
     from scipy.integrate import solve_ivp
 
     pj = {k: jnp.asarray(v, jnp.float64) for k, v in p.items()}
-    rhs = jax.jit(lambda t, y, qg: (D._rhs(model, None, motor, "V", 0, 8, pj, t, y, qg),
-                                    D._close(model.mechanism, y[:1], pj, qg, 8)[0]))
-    jac = jax.jit(jax.jacfwd(lambda t, y, qg: D._rhs(model, None, motor, "V", 0, 8, pj, t, y, qg), argnums=1))
+    integ = D.Integrator(model, actuators=((0, motor),), close_iters=8)
+    rhs = jax.jit(lambda t, y, qg: (D.rhs(integ, pj, t, y, qg), D.close_loop(model.mechanism, y[:1], pj, qg, 8)[0]))
+    jac = jax.jit(jax.jacfwd(lambda t, y, qg: D.rhs(integ, pj, t, y, qg), argnums=1))
     state = {"q": jnp.asarray(guess)}
 
     def f(t, y):
@@ -158,7 +158,7 @@ def reference_solution(model, p, motor, t_end, guess):
 
 def bench_forward(t_end, steps_list, methods, repeats):
     model, p = FOURBAR_MODEL, FOURBAR_P
-    motor = DCMotor("R_a", "K_m", inductance="L_a")
+    motor = DCMotor("R_a", "K_m", inductance="L_a", voltage="V")
     guess = jnp.array([0.5, 1.6])
     from jaxmech.positions import solve
 
@@ -172,8 +172,8 @@ def bench_forward(t_end, steps_list, methods, repeats):
     inf = jnp.array([jnp.inf])
     rows = []
     for method in methods:
-        static = (model, method, n_max, None, motor, "V", 0, 5, 1e-12, 12)
-        fn = jax.jit(lambda h: D._forward(*static, pj, 0.0, h, y0, q0, -inf, inf))
+        integ = D.Integrator(model, method, n_max, actuators=((0, motor),), close_iters=5, newton_tol=1e-12, newton_max=12)
+        fn = jax.jit(lambda h, integ=integ: D.integrate(integ, pj, 0.0, h, y0, q0, -inf, inf))
         t0 = time.perf_counter()
         compiled = fn.lower(jnp.asarray(t_end / n_max)).compile()
         compile_s = time.perf_counter() - t0

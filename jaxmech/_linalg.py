@@ -44,7 +44,10 @@ UNROLL_MAX = 4
 
 
 def small_max(x):
-    """Max over the last axis, unrolled for small sizes."""
+    """Max over the last axis, unrolled for small sizes (0 for an empty axis: every use is a
+    maximum of magnitudes, and a mechanism without dependent coordinates has none)."""
+    if x.shape[-1] == 0:
+        return jnp.zeros(x.shape[:-1], x.dtype)
     if x.shape[-1] > UNROLL_MAX:
         return jnp.max(x, axis=-1)
     return functools.reduce(jnp.maximum, [x[..., i] for i in range(x.shape[-1])])
@@ -52,7 +55,7 @@ def small_max(x):
 
 def small_sum(x):
     """Sum over the last axis, unrolled for small sizes."""
-    if x.shape[-1] > UNROLL_MAX:
+    if x.shape[-1] == 0 or x.shape[-1] > UNROLL_MAX:
         return jnp.sum(x, axis=-1)
     return functools.reduce(jnp.add, [x[..., i] for i in range(x.shape[-1])])
 
@@ -63,7 +66,7 @@ def small_tmatmul(a, b):
     the batch size, with a different rounding (measured: a sweep in chunks of 1 and of 9
     designs differed in the last bit); the written-out sums are the same for every batch,
     and they fuse with their neighbours."""
-    if a.shape[0] > UNROLL_MAX:
+    if a.shape[0] == 0 or a.shape[0] > UNROLL_MAX:
         return a.T @ b
     terms = [a[i][:, None] * b[i][None] if b.ndim == 2 else a[i] * b[i] for i in range(a.shape[0])]
     return functools.reduce(jnp.add, terms)
@@ -142,6 +145,8 @@ def solve_small(a, b):
     Cramer's rule for 1x1 and 2x2, unrolled elimination up to ``UNROLL_MAX``, a loop beyond.
     """
     n = a.shape[-1]
+    if n == 0:  # no unknowns (a mechanism without dependent coordinates)
+        return b
     if n == 1:
         return b / a[0, 0]
     if n == 2:
@@ -184,7 +189,9 @@ def inv_small(a, blocks=None):
 
 def cond1(a, blocks=None):
     """1-norm condition number of a small square matrix (inf where singular); ``blocks``:
-    its block-triangular structure, if any (``solve_blocks``)."""
+    its block-triangular structure, if any (``solve_blocks``); 1 for an empty matrix."""
+    if a.shape[-1] == 0:
+        return jnp.ones((), a.dtype)
     norm1 = lambda m: small_max(small_sum(jnp.abs(m).T))  # noqa: E731  (max column sum)
     c = norm1(a) * norm1(inv_small(a, blocks))
     return where(jnp.isfinite(c), c, jnp.inf)

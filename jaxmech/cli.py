@@ -453,6 +453,10 @@ def main(argv=None) -> int:
     except UsageError as e:
         print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
+    except MemoryError as e:  # a grid (or a stroke) too large to hold: numpy refuses it at once
+        print(f"{PROG}: error: out of memory: {' '.join(str(e).split())}; ask for fewer --grid values or --points",
+              file=sys.stderr)
+        return 2
     except OSError as e:  # a destination that failed after the checks (disk full, races)
         print(f"{PROG}: error: cannot write {e.filename or ''}: {e.strerror or e}".replace("  ", " "), file=sys.stderr)
         return 2

@@ -146,7 +146,9 @@ class Mechanism:
     - `inputs`: names of the driven coordinates ``u`` (one per degree of freedom).
     - `params`: names of every parameter the scene uses (kinematic and physical).
     - `constraints`: ``fn(q, u, p) -> sequence`` of complex loops and real scalars;
-      must give exactly ``m`` real equations.
+      must give exactly ``m`` real equations.  ``None`` (or ``[]``) when there are no
+      dependent coordinates: a mechanism of inputs only (a hinged flap, a rotating disc)
+      is solved trivially and its dynamics and statics work like any other's.
     - `lengths`: names (of coords, inputs or params) measured in metres.  Defaults to
       every parameter.  Their magnitude sets the residual scale.
     - `signed`: length parameters that may be zero or negative (offsets).  Every other
@@ -166,7 +168,7 @@ class Mechanism:
     coords: Sequence[str]
     inputs: Sequence[str]
     params: Sequence[str]
-    constraints: Callable
+    constraints: Callable | None = None
     lengths: Sequence[str] | None = None
     signed: Sequence[str] = ()
     points: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
@@ -182,8 +184,6 @@ class Mechanism:
         every = self.coords + self.inputs + self.params
         if len(set(every)) != len(every):
             raise ValueError("coords, inputs and params must not share a name")
-        if not self.coords:
-            raise ValueError("coords: a mechanism needs at least one dependent coordinate")
         lengths = self.params if self.lengths is None else _names(self.lengths, "lengths")
         for n in lengths:
             if n not in every:
@@ -195,7 +195,10 @@ class Mechanism:
                 raise ValueError(f"signed: {n!r} is not a parameter")
         set_("signed", signed)
         set_("points", dict(self.points))
-        if not callable(self.constraints):
+        if self.constraints is None and self.coords:
+            raise ValueError(f"constraints: {len(self.coords)} dependent coordinates {self.coords} need "
+                             f"constraints=fn(q, u, p) -> sequence of equations")
+        if self.constraints is not None and not callable(self.constraints):
             raise ValueError("constraints must be a function fn(q, u, p) -> sequence of equations")
 
     # ------------------------------------------------------------------ identity
@@ -269,7 +272,7 @@ class Mechanism:
 
         Complex loops contribute (real, imaginary); real equations contribute one entry.
         """
-        eqs = self.constraints(self.vars_q(q), self.vars_u(u), self.vars_p(p))
+        eqs = [] if self.constraints is None else self.constraints(self.vars_q(q), self.vars_u(u), self.vars_p(p))
         if not isinstance(eqs, (list, tuple)):
             eqs = [eqs]
         parts = []
@@ -279,7 +282,10 @@ class Mechanism:
                 parts += [jnp.real(e), jnp.imag(e)]
             else:
                 parts.append(e)
-        r = jnp.stack([jnp.reshape(x, ()) for x in parts])
+        if parts:
+            r = jnp.stack([jnp.reshape(x, ()) for x in parts])
+        else:  # no equations: an empty residual of the arguments' dtype
+            r = jnp.zeros((0,), jnp.result_type(q, u, float))
         if r.shape[0] != self.m:
             raise ValueError(
                 f"{self.name}: constraints give {r.shape[0]} real equations for "
@@ -355,27 +361,31 @@ class Mechanism:
         Checks names (no missing, no unknown) always, and values (finite; positive
         lengths) where they are concrete numbers rather than traced values.
         """
-        if not isinstance(p, Mapping):
-            raise ValueError(f"{self.name}: parameters must be a mapping name -> value, got {type(p).__name__}")
-        missing = [n for n in self.params if n not in p]
-        unknown = [n for n in p if n not in self.params]
-        if unknown:
-            raise ValueError(
-                f"{self.name}: unknown parameter(s) {unknown}; this mechanism's parameters are {list(self.params)}"
-            )
-        if missing:
-            raise ValueError(f"{self.name}: missing parameter(s) {missing}")
-        for n in self.params:
-            v = p[n]
-            if isinstance(v, jax.core.Tracer):
-                continue
-            arr = np.asarray(v)
-            if not np.issubdtype(arr.dtype, np.number):
-                raise ValueError(f"{self.name}: parameter {n!r} must be a number, got {arr.dtype}")
-            if not np.all(np.isfinite(arr)):
-                raise ValueError(f"{self.name}: parameter {n!r} must be finite, got {show_value(v)}")
-            if n in self.lengths and n not in self.signed and np.any(arr <= 0):
-                raise ValueError(
-                    f"{self.name}: length {n!r} must be positive, got {show_value(v)}; "
-                    f"give a positive length in metres"
-                )
+        check_parameters(self.name, p, self.params, self.lengths, self.signed, whose="this mechanism's")
+
+
+def check_parameters(owner: str, p: Mapping, names: Sequence[str], lengths: Sequence[str] = (),
+                     signed: Sequence[str] = (), *, whose: str = "the") -> None:
+    """Eager checks of a parameter mapping ``p`` against the declared `names` of `owner`
+    (a mechanism's or a model's name, for messages); raises ``ValueError`` naming the
+    parameter.  Names: none unknown, none missing.  Concrete values (traced ones are
+    skipped): numbers, finite, and positive for `lengths` not in `signed`."""
+    if not isinstance(p, Mapping):
+        raise ValueError(f"{owner}: parameters must be a mapping name -> value, got {type(p).__name__}")
+    missing = [n for n in names if n not in p]
+    unknown = [n for n in p if n not in names]
+    if unknown:
+        raise ValueError(f"{owner}: unknown parameter(s) {unknown}; {whose} parameters are {list(names)}")
+    if missing:
+        raise ValueError(f"{owner}: missing parameter(s) {missing}")
+    for n in names:
+        v = p[n]
+        if isinstance(v, jax.core.Tracer):
+            continue
+        arr = np.asarray(v)
+        if not np.issubdtype(arr.dtype, np.number):
+            raise ValueError(f"{owner}: parameter {n!r} must be a number, got {arr.dtype}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{owner}: parameter {n!r} must be finite, got {show_value(v)}")
+        if n in lengths and n not in signed and np.any(arr <= 0):
+            raise ValueError(f"{owner}: length {n!r} must be positive, got {show_value(v)}; give a positive length in metres")

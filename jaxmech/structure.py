@@ -139,6 +139,8 @@ def blocks(mech: Mechanism) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ..
     does not trace)."""
     m = mech.m
     whole = ((tuple(range(m)), tuple(range(m))),)
+    if m == 0:  # nothing to order (a mechanism without dependent coordinates)
+        return whole
     try:
         pattern = sparsity(mech)
     except Exception:  # noqa: BLE001 - a constraint that does not trace: no structure (its error shows at solve time)

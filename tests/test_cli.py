@@ -54,15 +54,6 @@ def theta4_at_zero(a, b, c, d):
     return math.pi - math.acos((c * c + f * f - b * b) / (2 * c * f))
 
 
-def assert_user_error(proc, match):
-    assert proc.returncode == 2, proc.stderr
-    assert "Traceback" not in proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("jaxmech: error: ")
-    assert match in lines[0]
-
-
 # ----------------------------------------------------------------------- help and listing
 def test_scenes_one_line_each():
     proc = jaxmech("scenes")
@@ -106,34 +97,79 @@ def test_run_writes_csv_plots_and_summary(tmp_path):
     assert f"wrote {tmp_path / 'fourbar.csv'}" in proc.stdout
 
 
-ERRORS = {
+# A user's mistakes, each answered by one line on stderr and exit status 2 (``MISTAKES``):
+# names, values, units, files, grid shapes and sizes, designs that cannot be assembled,
+# command-line syntax.  All run in process (``main``, quick: most are caught before JAX is set
+# up, the rest share one compiled four-bar stroke); ``AS_A_USER`` runs a few of them as the
+# command a user types.
+MISTAKES = {
+    # names
     "unknown scene": (["run", "fivebar"], "unknown scene 'fivebar'"),
-    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter(s) ['e']"),
-    "bad value": (["run", "fourbar", "--set", "a=one"], "'one' is not a number"),
-    "negative length": (["run", "fourbar", "--set", "a=-1"], "length 'a' must be positive"),
-    "bad grid syntax": (["sweep", "fourbar", "--grid", "a=1:2"], "--grid expects NAME=START:STOP:N"),
-    "unknown grid parameter": (["sweep", "fourbar", "--grid", "z=1:2:3"], "has no parameter(s) ['z']"),
-    "animation format": (["animate", "fourbar", "--out", "x.mp4"], "must end in .gif or .html"),
+    "unknown scene, other case": (["run", "FOURBAR"], "unknown scene 'FOURBAR'"),
+    "unknown scene to sweep": (["sweep", "fivebar", "--grid", "a=1:2:3"], "unknown scene 'fivebar'"),
     "report unknown scene": (["report", "--scenes", "fivebar"], "unknown scene(s) ['fivebar']"),
-}
-
-# Command-line syntax errors are caught before JAX is set up, so they are also checked in
-# process (quicker than a subprocess each).
-SYNTAX_ERRORS = {
+    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter(s) ['e']"),
+    "a coordinate is not a parameter": (["run", "fourbar", "--set", "theta3=1"], "has no parameter(s) ['theta3']"),
+    "parameter in the wrong case": (["animate", "fourbar", "--set", "A=1"], "has no parameter(s) ['A']"),
+    "unknown grid parameter": (["sweep", "fourbar", "--grid", "z=1:2:3"], "has no parameter(s) ['z']"),
+    # values and units
+    "bad value": (["run", "fourbar", "--set", "a=one"], "'one' is not a number"),
+    "value with a unit": (["run", "fourbar", "--set", "a=1mm"], "'1mm' is not a number (SI units"),
+    "value in degrees": (["run", "fourbar", "--set", "a=10deg"], "'10deg' is not a number (SI units"),
+    "empty value": (["run", "fourbar", "--set", "a="], "'' is not a number"),
+    "infinite value": (["run", "fourbar", "--set", "a=inf"], "value must be finite, got 'inf'"),
+    "value that overflows": (["run", "fourbar", "--set", "a=1e400"], "value must be finite, got '1e400'"),
+    "negative length": (["run", "fourbar", "--set", "a=-1"], "length 'a' must be positive, got -1.0"),
+    "zero length": (["run", "fourbar", "--set", "d=0"], "length 'd' must be positive, got 0.0"),
+    "negative spring stiffness": (["run", "sma_flap", "--set", "k1=-5"], "k1 must be >= 0 N/m, got -5.0"),
+    # designs that cannot be assembled
+    "unassemblable four-bar": (["run", "fourbar", "--set", "a=10"], "cannot be assembled"),
+    "four-bar that overflows": (["run", "fourbar", "--set", "b=1e300"], "cannot be assembled"),
+    "unassemblable flap": (["run", "flap_msd", "--set", "a=10"], "loop 1 cannot close"),
+    "stroke that does not fit": (["run", "landing_gear", "--set", "x2=100"], "does not fit"),
+    "unassemblable animation": (["animate", "fourbar", "--set", "a=10", "--out", "x.gif"], "cannot be assembled"),
+    # --set syntax
     "not NAME=VALUE": (["run", "fourbar", "--set", "a"], "--set expects NAME=VALUE"),
+    "no name": (["run", "fourbar", "--set", "=1"], "--set expects NAME=VALUE"),
     "set twice": (["animate", "fourbar", "--set", "a=1", "--set", "a=2"], "--set a is given twice"),
-    "too few points": (["run", "fourbar", "--points", "1"], "--points must be at least 2"),
-    "no verb": ([], "required"),
-    "unknown verb": (["plot"], "invalid choice"),
+    # grids: syntax, empty, too large
+    "bad grid syntax": (["sweep", "fourbar", "--grid", "a=1:2"], "--grid expects NAME=START:STOP:N"),
+    "grid without a name": (["sweep", "fourbar", "--grid", "1:2:3"], "--grid expects NAME=START:STOP:N"),
+    "grid start not a number": (["sweep", "fourbar", "--grid", "a=x:2:3"], "START and STOP must be numbers"),
+    "infinite grid end": (["sweep", "fourbar", "--grid", "a=1:inf:3"], "START and STOP must be finite"),
     "bad grid count": (["sweep", "fourbar", "--grid", "a=1:2:x"], "N must be a whole number"),
-    "empty grid": (["sweep", "fourbar", "--grid", "a=1:2:0"], "N must be at least 1"),
+    "grid count missing": (["sweep", "fourbar", "--grid", "a=1:2:"], "N must be a whole number"),
+    "empty grid": (["sweep", "fourbar", "--grid", "a=1:2:0"], "N must be at least 1, got 0"),
+    "negative grid count": (["sweep", "fourbar", "--grid", "a=1:2:-3"], "N must be at least 1, got -3"),
+    "grid twice": (["sweep", "fourbar", "--grid", "a=1:2:3", "--grid", "a=1:2:3"], "--grid a is given twice"),
     "no grid": (["sweep", "fourbar"], "at least one --grid"),
-    "bad chunk size": (["sweep", "fourbar", "--grid", "a=1:2:3", "--chunk-size", "0"], "--chunk-size must be at least 1"),
+    "grid too large": (["sweep", "fourbar", "--grid", "a=1:2:1000000000000000"], "out of memory"),
+    "grid product too large": (["sweep", "fourbar", "--grid", "a=1:2:100000", "--grid", "b=1:2:100000", "--grid", "c=1:2:100000"],
+                               "out of memory"),
+    # counts
+    "too few points": (["run", "fourbar", "--points", "1"], "--points must be at least 2, got 1"),
     # the limit a message states is the limit enforced: 0, -5 and 1 all say "at least 2"
     "zero points": (["run", "fourbar", "--points", "0"], "--points must be at least 2, got 0"),
     "negative points": (["sweep", "fourbar", "--grid", "a=1:2:3", "--points", "-5"], "--points must be at least 2, got -5"),
     "points not a number": (["report", "--points", "many"], "--points must be a whole number"),
+    "points in exponent form": (["run", "fourbar", "--points", "1e3"], "--points must be a whole number, got '1e3'"),
+    "bad chunk size": (["sweep", "fourbar", "--grid", "a=1:2:3", "--chunk-size", "0"], "--chunk-size must be at least 1"),
+    "no frames": (["animate", "fourbar", "--frames", "0"], "--frames must be at least 1, got 0"),
+    "frame rate not a number": (["animate", "fourbar", "--fps", "x"], "--fps must be a whole number"),
+    # files
+    "animation format": (["animate", "fourbar", "--out", "x.mp4"], "must end in .gif or .html"),
+    "sweep output is a folder": (["sweep", "fourbar", "--grid", "a=1:2:3", "--out", "."], "is a folder; give a file name"),
+    "animation output is a folder": (["animate", "fourbar", "--out", "made.gif"], "is a folder; give a file name"),
+    "run output is a file": (["run", "fourbar", "--out", "a_file"], "is a file, not a folder"),
+    # command-line syntax
+    "no verb": ([], "required"),
+    "unknown verb": (["plot"], "invalid choice"),
+    "no scene": (["run"], "the following arguments are required: SCENE"),
+    "extra argument": (["run", "fourbar", "extra"], "unrecognized arguments: extra"),
+    "report without scene names": (["report", "--scenes"], "expected at least one argument"),
 }
+AS_A_USER = ["unknown scene", "value with a unit", "unassemblable four-bar", "grid too large"]
+NUMPY_REPR = ("np.", "array(", "float64(", "dtype(")  # what a person must never read in a message
 
 
 @pytest.mark.parametrize("verb", [["run", "fourbar"], ["report"], ["animate", "fourbar"], ["sweep", "fourbar", "--grid", "a=1:2:2"]])
@@ -166,25 +202,40 @@ def test_parameter_messages_print_plain_numbers():
         assert shown in str(e.value) and "np." not in str(e.value) and "array(" not in str(e.value)
 
 
-@pytest.mark.parametrize("case", list(SYNTAX_ERRORS))
-def test_syntax_errors_in_process(case, capsys):
-    args, match = SYNTAX_ERRORS[case]
+def one_line_error(err: str, match: str) -> str:
+    """The single stderr line of a user error, checked: prefix, match, no traceback, no numpy repr."""
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    line = lines[0]
+    assert line.startswith("jaxmech: error: ") and match in line, line
+    assert not any(r in line for r in NUMPY_REPR), line
+    return line
+
+
+def test_there_are_at_least_twenty_mistakes():
+    assert len(MISTAKES) >= 20 and set(AS_A_USER) <= set(MISTAKES)
+
+
+@pytest.mark.parametrize("case", list(MISTAKES))
+def test_mistakes_are_one_line_exit_2(case, tmp_path, capsys, monkeypatch):
+    args, match = MISTAKES[case]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a_file").write_text("a file")
+    (tmp_path / "made.gif").mkdir()
     assert main(args) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("jaxmech: error: ") and match in err[0]
+    out, err = capsys.readouterr()
+    one_line_error(err, match)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "made.gif"]  # nothing written
 
 
-@pytest.mark.parametrize("case", list(ERRORS))
-def test_user_errors_are_one_line_exit_2(case, tmp_path):
-    args, match = ERRORS[case]
-    assert_user_error(jaxmech(*args, cwd=tmp_path), match)
+@pytest.mark.parametrize("case", AS_A_USER)
+def test_mistakes_as_a_user_types_them(case, tmp_path):
+    args, match = MISTAKES[case]
+    proc = jaxmech(*args, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    one_line_error(proc.stderr, match)
     assert not list(tmp_path.iterdir())  # nothing written
-
-
-def test_unassemblable_design_is_a_user_error(tmp_path):
-    proc = jaxmech("run", "fourbar", "--set", "a=10", "--out", tmp_path)
-    assert_user_error(proc, "cannot be assembled")
-    assert not (tmp_path / "fourbar.csv").exists()
 
 
 # ----------------------------------------------------------------------- animate, sweep, report
@@ -204,6 +255,7 @@ def test_sweep_writes_one_row_per_design_and_point(tmp_path):
     head, data = read_csv(out)
     for col in ("a", "d", *FOURBAR_COLUMNS):
         assert col in head
+    assert head[-len(FOURBAR_COLUMNS):] == FOURBAR_COLUMNS  # the order `jaxmech run` writes
     assert data.shape[0] == 4 * N
     a, d = data[:, head.index("a")], data[:, head.index("d")]
     assert sorted({(x, y) for x, y in zip(a, d)}) == [(0.9, 3.4), (0.9, 3.6), (1.1, 3.4), (1.1, 3.6)]

@@ -427,7 +427,7 @@ def test_inverse_dynamics_torque_reproduces_motion():
     def torque(t, q, u, ud, p):
         # the prescribed motion's inverse-dynamics torque, at the drive's own state
         uu, uud, uudd = (jnp.reshape(x, (1,)) for x in _drive_derivs(drive, t))
-        qd = D._close(FB, uu, p, q, 8)[0]
+        qd = D.close_loop(FB, uu, p, q, 8)[0]
         return D.generalized_forces(FB_MODEL, qd, uu, uud, uudd, p, t)[0]
 
     tr = D.forward_dynamics(FB_MODEL, P, 0.3, 0.0, FB_GUESS, h=0.005, steps=300, load=torque)

@@ -10,6 +10,11 @@ Two-point elements (``LinearSpring``, ``SMAWire``, ``HydraulicCylinder``) are *a
 laws*: calling one as ``law(length, rate, p, t)`` gives the tension (N, positive pulls
 its two ends together), which is what ``jaxmech.dynamics.Axial`` expects.
 
+**Stateful actuators** (``StatefulActuator``: ``DCMotor``, ``OilCylinder``) act on one
+input of a model in forward dynamics and may carry states of their own (a motor's
+current, a cylinder's chamber pressure) that are integrated with the motion.  They are
+found by name in ``REGISTRY``: a new one is one module in this package and one line there.
+
 Sign conventions: torques and speeds of a motor are on the same axis, positive together
 (motoring: ``torque * speed > 0``).  Units SI throughout (V, A, ohm, H, N m/A, m, Pa, K).
 """
@@ -17,16 +22,24 @@ Sign conventions: torques and speeds of a motor are on the same axis, positive t
 from __future__ import annotations
 
 import dataclasses
+import importlib
 from collections.abc import Callable, Mapping
-from typing import Any, Union
+from typing import Any, Protocol, Union
 
 import jax.numpy as jnp
 
-from .mechanism import Vars
+from ..mechanism import Vars
 
 __all__ = [
     "Spec",
     "resolve",
+    "spec_names",
+    "parameter_names",
+    "command",
+    "StatefulActuator",
+    "REGISTRY",
+    "get_actuator",
+    "OilCylinder",
     "DCMotor",
     "ScrewJack",
     "HydraulicCylinder",
@@ -55,6 +68,84 @@ def resolve(spec: Spec, p: Mapping):
     return spec
 
 
+def spec_names(*specs) -> tuple[str, ...]:
+    """The parameter names among ``specs`` (those given as strings), in order, once each."""
+    return tuple(dict.fromkeys(s for s in specs if isinstance(s, str)))
+
+
+def parameter_names(actuator) -> tuple[str, ...]:
+    """The parameters an actuator declares: every name its specs give, in field order.
+
+    A motor built as ``DCMotor("R_a", "K_m")`` declares ``R_a`` and ``K_m``: a model that
+    uses it accepts them in ``p`` without listing them anywhere else.  A name the
+    mechanism or the model declares too is the same parameter (merged by name).
+    ``()`` for ``None`` or an object that is not an actuator dataclass.  An actuator whose
+    specs are not all used in every configuration says which are by a ``used_specs()``
+    method (``SMAWire``: the transformation temperatures only with a temperature).
+    """
+    if actuator is None or not dataclasses.is_dataclass(actuator):
+        return ()
+    if hasattr(actuator, "used_specs"):
+        return spec_names(*actuator.used_specs())
+    return spec_names(*(getattr(actuator, f.name) for f in dataclasses.fields(actuator)))
+
+
+def command(spec, t, p):
+    """Value of a time-dependent command spec (a voltage, a flow) at time ``t`` (s): a
+    parameter name, a number, or ``fn(t, p) -> value`` (``p`` as a ``Vars``)."""
+    if isinstance(spec, str):
+        return resolve(spec, p)
+    if callable(spec):
+        return spec(t, p if isinstance(p, Vars) else Vars(p))
+    return spec
+
+
+class StatefulActuator(Protocol):
+    """What forward dynamics needs of an actuator acting on one input (``forward_dynamics
+    (..., actuators={input_name: actuator})``).
+
+    - ``n_states``: number of its own states (static int; 0 for a memoryless actuator).
+    - ``initial_state(p) -> (n_states,)``: the states at the start of a run.
+    - ``force(state, position, speed, t, p)``: generalized force on the input (N m or N,
+      positive in the input's positive sense) at the input's position and speed.
+    - ``rate(state, position, speed, t, p) -> (n_states,)``: the states' time derivatives.
+
+    Every number comes from specs resolved in ``p`` (``parameter_names`` lists them), so an
+    actuator is static (hashable) and one compiled run serves every design.
+    """
+
+    n_states: int
+
+    def initial_state(self, p): ...
+
+    def force(self, state, position, speed, t, p): ...
+
+    def rate(self, state, position, speed, t, p): ...
+
+
+#: Stateful actuators by name: ``name -> (module, class)``, imported on first use.  A new
+#: actuator is one module of this package and one line here.
+REGISTRY = {
+    "dc_motor": ("jaxmech.actuators", "DCMotor"),
+    "oil_cylinder": ("jaxmech.actuators.oil_cylinder", "OilCylinder"),
+}
+
+
+def get_actuator(name: str) -> type:
+    """The actuator class registered as ``name``; ``ValueError`` listing the names otherwise."""
+    if name not in REGISTRY:
+        raise ValueError(f"unknown actuator {name!r}; known actuators: {', '.join(REGISTRY)}")
+    module, attr = REGISTRY[name]
+    return getattr(importlib.import_module(module), attr)
+
+
+def __getattr__(name):  # the registered actuators as attributes of this package (lazy: no cycle)
+    for module, attr in REGISTRY.values():
+        if attr == name and module != __name__:
+            return getattr(importlib.import_module(module), attr)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 # --------------------------------------------------------------------------- DC motor
 @dataclasses.dataclass(frozen=True)
 class DCMotor:
@@ -70,12 +161,16 @@ class DCMotor:
     - `inductance`: armature inductance ``L`` (H); ``None`` treats the current as
       algebraic (``L = 0``), which removes the stiff electrical mode.
     - `ratio`: gear ratio motor speed / input speed (dimensionless), default 1.
+    - `voltage`: command spec (a parameter name, a number or ``fn(t, p) -> V``) when the
+      motor drives a forward-dynamics run (``StatefulActuator``; ``forward_dynamics``'s
+      `voltage` argument sets it).  Its state is the current with an inductance, none without.
     """
 
     resistance: Spec = "R_a"
     constant: Spec = "K_m"
     inductance: Spec | None = None
     ratio: Spec = 1.0
+    voltage: Spec | Callable | None = None
 
     def _rkn(self, p):
         return resolve(self.resistance, p), resolve(self.constant, p), resolve(self.ratio, p)
@@ -101,6 +196,28 @@ class DCMotor:
         """Torque at the input (N m) for armature ``current`` (A): ``n K i``."""
         _, K, n = self._rkn(p)
         return n * K * current
+
+    # ---- StatefulActuator
+    @property
+    def n_states(self) -> int:
+        return 0 if self.inductance is None else 1
+
+    def initial_state(self, p):
+        """Zero current (A); ``forward_dynamics(current0=...)`` starts elsewhere."""
+        return jnp.zeros((self.n_states,))
+
+    def force(self, state, position, speed, t, p):
+        """Torque at the input (N m) at the commanded voltage: steady current without an
+        inductance, ``n K i`` with one."""
+        if self.inductance is None:
+            return self.steady_torque(command(self.voltage, t, p), speed, p)
+        return self.torque(state[0], p)
+
+    def rate(self, state, position, speed, t, p):
+        """``(di/dt,)`` with an inductance, ``()`` without."""
+        if self.inductance is None:
+            return jnp.zeros((0,))
+        return jnp.stack([self.current_rate(state[0], command(self.voltage, t, p), speed, p)])
 
     def current_rate(self, current, voltage, speed, p):
         """``di/dt`` (A/s) = ``(v - R i - n K w) / L`` (needs an inductance)."""
@@ -255,6 +372,13 @@ class SMAWire:
             raise ValueError("SMAWire: give a martensite `fraction` or a wire `temperature` (or a constitutive `law`)")
         if self.law is not None and not callable(self.law):
             raise ValueError("SMAWire: `law` must be a function law(strain, p) -> stress in Pa")
+
+    def used_specs(self) -> tuple:
+        """The specs this wire reads (see ``parameter_names``)."""
+        if self.law is not None:
+            return self.area, self.length0, self.prestrain
+        heat = (self.temperature, self.A_s, self.A_f) if self.fraction is None else (self.fraction,)
+        return self.area, self.length0, self.E_M, self.E_A, self.prestrain, *heat
 
     def martensite_fraction(self, p):
         """Martensite fraction ``xi`` in [0, 1] (-)."""

@@ -1,0 +1,348 @@
+"""Forward dynamics: ``M(u) u_ddot + h(u, u_dot, t) = tau`` integrated in the inputs with an
+implicit Runge-Kutta method (Radau IIA by default, L-stable for a stiff motor inductance),
+the loop closed inside every stage, differentiable end to end.
+
+``h = (1/2) M' u_dot^2 - Q`` for one input: the inverse-dynamics force at zero input
+acceleration (``virtual_power.generalized_forces``).  The stage equations are attached to
+their arguments by an implicit-function custom JVP; see ``forward_dynamics``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable, Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._linalg import solve_small
+from ..actuators import DCMotor, parameter_names
+from ..inputs import as_coords, as_inputs
+from ..options import SolverOptions
+from ..positions import solve
+from ..status import Status
+from .closure import close_loop
+from .model import Model, mechanism_params, prepare_params
+from .status import DynStatus
+from .virtual_power import generalized_forces, mass_matrix
+
+__all__ = ["METHODS", "Trajectory", "Integrator", "rhs", "integrate", "forward_dynamics"]
+
+
+def _tableau(name):
+    r6, r3 = np.sqrt(6.0), np.sqrt(3.0)
+    if name == "radau5":  # Radau IIA, 3 stages, order 5, L-stable, stiffly accurate
+        A = [[(88 - 7 * r6) / 360, (296 - 169 * r6) / 1800, (-2 + 3 * r6) / 225],
+             [(296 + 169 * r6) / 1800, (88 + 7 * r6) / 360, (-2 - 3 * r6) / 225],
+             [(16 - r6) / 36, (16 + r6) / 36, 1 / 9]]
+        c = [(4 - r6) / 10, (4 + r6) / 10, 1.0]
+    elif name == "gauss4":  # Gauss-Legendre, 2 stages, order 4, A-stable, symplectic
+        A = [[0.25, 0.25 - r3 / 6], [0.25 + r3 / 6, 0.25]]
+        c = [0.5 - r3 / 6, 0.5 + r3 / 6]
+    elif name == "midpoint":  # implicit midpoint, order 2, A-stable, symplectic
+        A, c = [[0.5]], [0.5]
+    else:
+        raise ValueError(f"unknown method {name!r}; choose one of {METHODS}")
+    A = np.array(A)
+    b = A[-1] if name == "radau5" else (np.array([0.5, 0.5]) if name == "gauss4" else np.array([1.0]))
+    # y_{n+1} = y_n + h b^T F = y_n + b^T A^{-1} Z with Z_i = Y_i - y_n: no extra f evaluations.
+    d = np.linalg.solve(A.T, b)
+    return A, np.array(c), d
+
+
+#: Implicit Runge-Kutta methods of ``forward_dynamics``: ``"radau5"`` (L-stable: use it with
+#: a motor inductance), ``"gauss4"`` and ``"midpoint"`` (A-stable, symplectic: best energy
+#: behaviour for unloaded mechanisms, but they do not damp a stiff electrical mode).
+METHODS = ("radau5", "gauss4", "midpoint")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """Forward-dynamics result (a pytree; leading axis = the ``steps + 1`` time points).
+
+    - `t` (s), `u` ``(N+1, dof)``, `u_dot`, `q` ``(N+1, m)``.
+    - `current`: motor current ``(N+1, 1)`` (A) with an inductive motor, else ``(N+1, 0)``.
+    - `status`: ``DynStatus`` of the run (scalar); `t_stop`: time of the last valid state.
+      Rows after a stop are NaN; with ``STROKE_END`` the first state past the end is kept.
+    - `newton`: simplified-Newton iterations of each step ``(N,)``.
+    - `states`: every actuator's states ``(N+1, k)`` in the order of the run's actuators
+      (the motor first): a motor's current (A), a cylinder's pressure (Pa)...
+    """
+
+    t: jax.Array
+    u: jax.Array
+    u_dot: jax.Array
+    current: jax.Array
+    q: jax.Array
+    status: jax.Array
+    t_stop: jax.Array
+    newton: jax.Array
+    states: jax.Array
+
+
+@dataclasses.dataclass(frozen=True)
+class Integrator:
+    """Static settings of one forward-dynamics program (hashable: they are the compiled
+    program's identity; numbers that change between runs are arguments of ``integrate``).
+
+    - `model`: the ``Model``; `method`: one of ``METHODS``; `steps`: number of steps.
+    - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``, or None.
+    - `actuators`: ``((input index, actuator), ...)``, each a ``StatefulActuator``
+      (``jaxmech.actuators``: a ``DCMotor`` with its voltage, an ``OilCylinder``...); their
+      states follow ``(u, u_dot)`` in the state vector, in this order.
+    - `close_iters`: Newton steps that close the loop at each stage (``close_loop``).
+    - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment) and budget.
+    """
+
+    model: Model
+    method: str = "radau5"
+    steps: int = 1
+    load: Callable | None = None
+    actuators: tuple = ()
+    close_iters: int = 5
+    newton_tol: float = 1e-12
+    newton_max: int = 12
+
+
+def rhs(integ: Integrator, p, t, y, qg):
+    """``y' = f(t, y)`` with ``y = (u, u_dot, [i])``: ``M u_ddot = tau - h(u, u_dot, t)``
+    (and ``di/dt`` with an inductive motor), the loop closed near ``qg`` (``close_loop``).
+    NaN where the loop cannot be closed.  `p`: the parameter mapping (arrays)."""
+    model, load, iters = integ.model, integ.load, integ.close_iters
+    mech = model.mechanism
+    dof = mech.dof
+    u, ud = y[:dof], y[dof : 2 * dof]
+    q, ok = close_loop(mech, u, p, qg, iters)
+    M = mass_matrix(model, q, u, p)
+    # h(u, u_dot, t): the inverse-dynamics force at zero input acceleration
+    # (for one input: (1/2) M'(u) u_dot^2 - Q(u, u_dot, t)).
+    hvec, _ = generalized_forces(model, q, u, ud, jnp.zeros_like(ud), p, t)
+    tau = jnp.zeros_like(u)
+    if load is not None:
+        tau = tau + jnp.reshape(load(t, q, u, ud, p), (dof,))
+    # Each actuator: its force on its input, and the rates of its own states (StatefulActuator).
+    rates, at = [], 2 * dof
+    for k_in, act in integ.actuators:
+        state = y[at : at + act.n_states]
+        at += act.n_states
+        tau = tau.at[k_in].add(act.force(state, u[k_in], ud[k_in], t, p))
+        rates.append(jnp.reshape(jnp.asarray(act.rate(state, u[k_in], ud[k_in], t, p), y.dtype), (act.n_states,)))
+    udd = solve_small(M, tau - hvec)
+    f = jnp.concatenate([ud, udd, *rates])
+    return jnp.where(ok, f, jnp.nan)
+
+
+def _stage_residual(integ, A, c, Z, args):
+    """Stage equations ``G(Z) = Z - h A F(y + Z)`` (``Z_i = Y_i - y_n``)."""
+    y, qg, p, t, h = args
+    F = jax.vmap(lambda ci, zi: rhs(integ, p, t + ci * h, y + zi, qg))(c, Z)
+    return Z - h * (jnp.asarray(A, Z.dtype) @ F)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _attach_stages(G, Z_star, args):
+    """Identity on the converged stages ``Z*``; tangent ``dZ = -G_Z^{-1} G_args dargs``
+    (implicit function theorem on ``G(Z*, args) = 0``).  Written as a custom JVP rather than
+    ``jax.lax.custom_root``, which traces the linearization of ``G`` (third derivatives of
+    the positions) on every call, differentiated or not."""
+    return Z_star
+
+
+@_attach_stages.defjvp
+def _attach_stages_jvp(G, primals, tangents):
+    Z_star, args = primals
+    _, dargs = tangents
+    Z = _attach_stages(G, Z_star, args)
+    ok = jnp.all(jnp.isfinite(Z))
+    Zs = jnp.where(ok, Z, jnp.zeros_like(Z))
+    k = Z.size
+    jz = jax.jacfwd(lambda z: G(z, args))(Zs).reshape(k, k)
+    jz = jnp.where(ok & jnp.all(jnp.isfinite(jz)), jz, jnp.eye(k, dtype=jz.dtype))
+    _, g_args = jax.jvp(lambda a: G(Zs, a), (args,), (dargs,))
+    dZ = -jnp.linalg.solve(jz, g_args.reshape(-1)).reshape(Z.shape)
+    return Z, jnp.where(ok, dZ, jnp.zeros_like(dZ))
+
+
+def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
+    """The forward-dynamics program of ``forward_dynamics`` (traceable; jit it with `integ`
+    static): ``integ.steps`` fixed steps from ``y0 = (u, u_dot, [i])`` at ``t0`` with step
+    ``h`` (s), ``q0`` the solved coordinates at ``t0``, the run stopped outside ``[lo, hi]``
+    (``(dof,)`` each).
+
+    **Returns** ``(ys (steps+1, n), qs (steps+1, m), status, t_stop, newton (steps,))``.
+    """
+    model, method, steps, iters = integ.model, integ.method, integ.steps, integ.close_iters
+    newton_tol, newton_max = integ.newton_tol, integ.newton_max
+    mech = model.mechanism
+    dof = mech.dof
+    A_np, c_np, d_np = _tableau(method)
+    A, c, d = (jnp.asarray(x, y0.dtype) for x in (A_np, c_np, d_np))
+    s, n = A.shape[0], y0.shape[0]
+    stop = jax.lax.stop_gradient
+    ps = jax.tree_util.tree_map(stop, p)
+    f = lambda t, y, qg, p_: rhs(integ, p_, t, y, qg)  # noqa: E731
+    fd_step = float(jnp.finfo(y0.dtype).eps) ** 0.5
+
+    def step(carry, k):
+        y, q, status, t_stop = carry
+        t = t0 + k * h
+        qg = stop(q)
+        ys = stop(y)
+        scale = 1.0 + jnp.abs(ys)
+        # Simplified Newton with one iteration matrix I - h A (x) J(y_n) per step.  J only
+        # steers the iteration (the converged stages do not depend on it), so a forward
+        # difference is enough, and it avoids third derivatives of the implicit positions.
+        # The difference points ride in the same batched right-hand-side call as the
+        # stages: one copy of the right-hand side in the compiled step (compile time is
+        # dominated by it), at the price of n + 1 extra evaluations per iteration.
+        dy = fd_step * scale
+        ts = jnp.concatenate([t + c * h, jnp.full((n + 1,), t)])
+        y_fd = jnp.concatenate([ys[None], ys + jnp.diag(dy)])
+        eye = jnp.eye(s * n, dtype=y.dtype)
+
+        def newton(Z0):
+            def cond_fn(st):
+                it, _, _, err = st
+                return (it < newton_max) & (err > newton_tol)
+
+            def body(st):
+                it, Z, Minv, _ = st
+                fb = jax.vmap(lambda ti, yi: f(ti, yi, qg, ps))(ts, jnp.concatenate([ys + Z, y_fd]))
+                J0 = jnp.where(it == 0, ((fb[s + 1 :] - fb[s]) / dy[:, None]).T, 0.0)
+                J0 = jnp.where(jnp.isfinite(J0), J0, 0.0)
+                Minv = jnp.where(it == 0, jnp.linalg.inv(eye - h * jnp.kron(A, J0)), Minv)
+                dZ = -(Minv @ (Z - h * (A @ fb[:s])).reshape(-1)).reshape(Z.shape)
+                err = jnp.max(jnp.abs(dZ) / scale)
+                finite = jnp.isfinite(err)
+                # err = -1 marks a non-finite stage (the loop could not be closed): stop.
+                return it + 1, jnp.where(finite, Z + dZ, Z), Minv, jnp.where(finite, err, -1.0)
+
+            it, Z, _, err = jax.lax.while_loop(cond_fn, body, (0, Z0, eye, jnp.asarray(jnp.inf, Z0.dtype)))
+            return Z, it, err
+
+        Z_star, it, err = newton(jnp.zeros((s, n), y.dtype))
+        G = functools.partial(_stage_residual, integ, A_np, c_np)
+        Z = _attach_stages(G, stop(Z_star), (y, qg, p, t, h))
+        y_new = y + d @ Z
+        q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters)
+        conv = (err >= 0) & (err <= 1e3 * newton_tol)
+        finite = jnp.all(jnp.isfinite(y_new))
+        out_of_stroke = jnp.any(y_new[:dof] < lo) | jnp.any(y_new[:dof] > hi)
+        new_status = jnp.where(
+            (err < 0) | ~pos_ok, DynStatus.POSITION,
+            jnp.where(~conv, DynStatus.NOT_CONVERGED,
+                      jnp.where(~finite, DynStatus.NONFINITE,
+                                jnp.where(out_of_stroke, DynStatus.STROKE_END, DynStatus.OK))))
+        running = status == DynStatus.OK
+        accept = running & ((new_status == DynStatus.OK) | (new_status == DynStatus.STROKE_END))
+        y_next = jnp.where(accept, y_new, y)
+        q_next = jnp.where(accept, q_new, q)
+        status_next = jnp.where(running, new_status, status).astype(jnp.int32)
+        t_stop = jnp.where(accept, t + h, t_stop)
+        return (y_next, q_next, status_next, t_stop), (jnp.where(accept, y_new, jnp.nan), jnp.where(accept, q_new, jnp.nan), it)
+
+    init = (y0, q0, jnp.asarray(DynStatus.OK, jnp.int32), t0)
+    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(step, init, jnp.arange(steps, dtype=y0.dtype))
+    return jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its
+
+
+_integrate_jit = jax.jit(integrate, static_argnums=0)
+
+
+def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
+                     motor: DCMotor | None = None, voltage=None, current0=0.0, motor_input: str | None = None,
+                     actuators: Mapping | None = None, load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
+                     newton_tol: float = 1e-12, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
+    """Integrate the equations of motion in the inputs, with fixed steps (one design).
+
+    ``M(u) u_ddot + h(u, u_dot, t) = tau_load + tau_motor`` where ``M`` is ``mass_matrix``
+    and ``h`` the inverse-dynamics force at zero input acceleration (for one input
+    ``h = (1/2) M'(u) u_dot^2 - Q``); with an inductive motor the state also holds the
+    current, ``L di/dt = v - R i - n K w``.  Every stage closes the loop (a fixed number of
+    Newton steps from the step's start, attached to ``(u, p)`` by ``solve.implicit_root``),
+    and the stage equations ``Z = h A F(y + Z)`` are solved by simplified Newton (one
+    iteration matrix per step, from a finite-difference Jacobian) and attached to their
+    arguments by a custom JVP (the implicit function theorem on the stage equations:
+    ``dZ = -G_Z^{-1} G_args dargs``).  No derivative goes through an iteration, and the
+    whole run is differentiable, forward and reverse mode, in ``p``, ``u0``, ``u_dot0``
+    and ``h``: see ``docs/forward_dynamics_gradients.md`` and the notebook
+    ``notebooks/forward_dynamics_gradients.ipynb`` (a final angle's gradient in a mass,
+    a length and the motor voltage, checked against finite differences).
+
+    **Arguments**
+
+    - `p`: parameters; `u0`, `u_dot0`: initial inputs and rates ``(dof,)``; `guess`:
+      coordinates near the initial position (picks the branch).
+    - `h`: step (s); `steps`: number of steps (static); `t0`: start time (s).
+    - `method`: one of ``METHODS``.
+    - `motor`: a ``DCMotor`` on input `motor_input` (default the first); `voltage`: spec of
+      its voltage, a parameter name, a number, or ``fn(t, p) -> V``; `current0` (A).  The
+      parameters the motor's specs name, and a voltage's name, belong in `p` alongside the
+      model's (``Model.parameters``) without being declared anywhere else.
+    - `actuators`: ``{input name: actuator}``, further ``StatefulActuator``s (an
+      ``OilCylinder``...), each on its input, with states of their own started at their
+      ``initial_state(p)``; their parameters join `p` like the motor's.
+    - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``
+      (arrays; ``p`` a dict), e.g. a controller or a prescribed torque.
+    - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
+    - `newton_tol`: stage-Newton tolerance on the scaled increment; `newton_max`: its budget.
+    - `close_iters`: Newton steps that close the loop at each stage from the step's start
+      (the step must be small enough for them to converge; a failure is reported).
+    - `options`: settings of the initial position solve.
+
+    **Returns** a ``Trajectory``.  A run that reaches a singular or unassemblable position,
+    a failed step or the stroke end stops there with its ``DynStatus``; later rows are NaN.
+    """
+    mech = model.mechanism
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
+    if motor is not None and voltage is None and motor.voltage is None:
+        raise ValueError("a motor needs a voltage: a parameter name, a number or fn(t, p) -> V")
+    if int(steps) < 1:
+        raise ValueError(f"steps must be at least 1, got {steps}")
+    acts = []  # (input index, actuator), the motor first
+    if motor is not None:
+        if motor_input is not None and motor_input not in mech.inputs:
+            raise ValueError(f"motor_input {motor_input!r} is not an input; inputs are {list(mech.inputs)}")
+        k_in = 0 if motor_input is None else mech.inputs.index(motor_input)
+        acts.append((k_in, motor if voltage is None else dataclasses.replace(motor, voltage=voltage)))
+    for name, act in (actuators or {}).items():
+        if name not in mech.inputs:
+            raise ValueError(f"actuators: {name!r} is not an input; inputs are {list(mech.inputs)}")
+        if not all(hasattr(act, a) for a in ("n_states", "initial_state", "force", "rate")):
+            raise ValueError(f"actuators[{name!r}]: {type(act).__name__} is not a StatefulActuator "
+                             f"(n_states, initial_state, force, rate)")
+        acts.append((mech.inputs.index(name), act))
+    u0 = as_inputs(mech, jnp.asarray(u0), "u0")
+    ud0 = as_inputs(mech, jnp.asarray(u_dot0), "u_dot0")
+    guess = as_coords(mech, guess)
+    dtype = jnp.result_type(u0, ud0, guess, float)
+    pj = prepare_params(model, p, dtype, tuple(n for _, a in acts for n in parameter_names(a)))
+    parts = [u0.astype(dtype), ud0.astype(dtype)]
+    for i, (_, act) in enumerate(acts):
+        if act.n_states == 0:
+            continue
+        x0 = jnp.asarray(current0, dtype) if (i == 0 and motor is not None) else jnp.asarray(act.initial_state(pj), dtype)
+        parts.append(jnp.reshape(x0, (act.n_states,)))
+    y0 = jnp.concatenate(parts)
+    # The jitted batch solve (compiled once per mechanism and options); a dict of scalars
+    # is a batch of shape ().
+    sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, mechanism_params(model, pj),
+                guess.astype(dtype), options=options)
+    if stroke is None:
+        lo = jnp.full((mech.dof,), -jnp.inf, dtype)
+        hi = jnp.full((mech.dof,), jnp.inf, dtype)
+    else:
+        lo, hi = (jnp.broadcast_to(jnp.asarray(b, dtype), (mech.dof,)) for b in stroke)
+    integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters), float(newton_tol), int(newton_max))
+    ys, qs, status, t_stop, its = _integrate_jit(integ, pj, jnp.asarray(t0, dtype), jnp.asarray(h, dtype), y0, sol.q, lo, hi)
+    status = jnp.where(sol.status == Status.CONVERGED, status, DynStatus.POSITION).astype(jnp.int32)
+    dof = mech.dof
+    t = jnp.asarray(t0, dtype) + jnp.asarray(h, dtype) * jnp.arange(int(steps) + 1, dtype=dtype)
+    n_motor = acts[0][1].n_states if motor is not None else 0
+    return Trajectory(t=t, u=ys[:, :dof], u_dot=ys[:, dof:2 * dof], current=ys[:, 2 * dof:2 * dof + n_motor], q=qs,
+                      status=status, t_stop=t_stop, newton=its, states=ys[:, 2 * dof:])
+
