@@ -190,7 +190,7 @@ def test_progress_line_on_stderr(capfd):
 def test_dask_cluster_gives_identical_results(fourbar_grid):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0"
     ) as cluster, distributed.Client(cluster) as client:
         r = sweep_scene(FOURBAR, GRID, points=POINTS, client=client, chunk_size=5)
     assert r.info["backend"] == "dask" and r.info["n_chunks"] == 2

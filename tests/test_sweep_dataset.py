@@ -185,7 +185,7 @@ def test_dask_cluster_writes_the_same_dataset(uninterrupted, tmp_path):
     out = tmp_path / "dask.parquet"
     n = 20 * CHUNK  # the first designs of the same table: the same rows as the local run's
     table = {k: v[:n] for k, v in random_designs(RANGES, N_RANDOM, seed=SEED).items()}
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster, \
             distributed.Client(cluster) as client:
         s = sweep_dataset(FOURBAR, out, table=table, figures=FIGURES, points=POINTS, chunk_size=CHUNK, client=client, progress=False)
     assert s.info["backend"] == "dask" and s.chunks_written == 20 and not s.lost
