@@ -88,6 +88,31 @@ def test_top_level_help_as_a_command():
         assert verb in proc.stdout
 
 
+def test_scene_lists_its_parameters_with_units_and_defaults():
+    """``jaxmech scenes SCENE``: one row per parameter (name, SI unit, default, meaning), the
+    defaults equal to the scene's own and angles also shown in degrees."""
+    from jaxmech.scenes import get_scene
+
+    proc = jaxmech("scenes", "arc_track_flap")
+    assert proc.returncode == 0, proc.stderr
+    scene = get_scene("arc_track_flap")
+    rows = {ln.split()[0]: ln.split() for ln in proc.stdout.splitlines()[5:]}
+    assert list(rows) == list(scene.defaults)
+    assert rows["a1"][1] == "m" and float(rows["a1"][2]) == pytest.approx(0.275, rel=1e-6)
+    assert rows["alpha0"][1] == "rad" and rows["alpha0"][3:5] == ["(65", "deg)"]  # the thesis's 65 deg
+    assert rows["M12_i"][1:4] == ["N", "m", "750"]
+    assert proc.stdout.splitlines()[0].startswith("arc_track_flap: ") and "cruise" in proc.stdout.splitlines()[0]
+
+
+def test_every_scene_describes_every_parameter():
+    from jaxmech.scenes import get_scene
+
+    for name in scene_names():
+        scene = get_scene(name)
+        assert list(scene.parameters) == list(scene.defaults), name
+        assert all(unit and meaning for unit, meaning in scene.parameters.values()), name
+
+
 # ----------------------------------------------------------------------- run
 def test_run_writes_csv_plots_and_summary(tmp_path):
     proc = jaxmech("run", "fourbar", "--set", "d=3.4", "--out", tmp_path)
@@ -106,9 +131,24 @@ def test_run_writes_csv_plots_and_summary(tmp_path):
     assert f"wrote {tmp_path / 'fourbar.csv'}" in proc.stdout
 
 
+def test_set_takes_a_unit(tmp_path, capsys):
+    """``--set d=340cm`` is d = 3.4 m: the same theta4 as the closed form; the summary says
+    what was changed (in the reader's units)."""
+    assert main(["run", "fourbar", "--set", "d=340cm", "--points", "2", "--out", str(tmp_path)]) == 0
+    head, data = read_csv(tmp_path / "fourbar.csv")
+    assert abs(data[0, head.index("theta4[rad]")] - theta4_at_zero(1.0, 3.0, 2.5, 3.4)) < POS_TOL
+    out = capsys.readouterr().out
+    assert "changed from the defaults: d = 3.4 m" in out
+    row = next(ln.split() for ln in out.splitlines() if ln.startswith("theta2[deg]"))
+    assert float(row[1]) == 0.0 and float(row[2]) == pytest.approx(360.0, rel=1e-12)  # summary in degrees
+
+
 ERRORS = {
     "unknown scene": (["run", "fivebar"], "unknown scene 'fivebar'"),
-    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter(s) ['e']"),
+    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter 'e'; its parameters are: a, b, c, d"),
+    "misspelt parameter": (["run", "arc_track_flap", "--set", "M12i=220"], "has no parameter 'M12i'; did you mean 'M12_i'?"),
+    "wrong unit": (["run", "arc_track_flap", "--set", "alpha0=65mm"], "--set alpha0: unit 'mm' does not fit a quantity in rad"),
+    "misspelt scene to describe": (["scenes", "arc_track"], "unknown scene 'arc_track'"),
     "bad value": (["run", "fourbar", "--set", "a=one"], "'one' is not a number"),
     "negative length": (["run", "fourbar", "--set", "a=-1"], "length 'a' must be positive"),
     "bad grid syntax": (["sweep", "fourbar", "--grid", "a=1:2"], "--grid expects NAME=START:STOP:N"),
