@@ -558,7 +558,7 @@ def table3(p: Mapping | None = None) -> dict:
 
 # --------------------------------------------------------------------------- scenes
 def _drawing(p):
-    """Drawing spec (``jaxmech.plot``): screw B0-B with the nut's line, the flap plate
+    """Drawing spec (``jaxmech.drawing``): screw B0-B with the nut's line, the flap plate
     A-F-G-D, both arc slots about A0 (the arcs their pins sweep), the chord A_i A_f of the
     design method (fixed points), traced A and D, transmission angle at A (A0-A-B0)."""
     pn = {k: np.asarray(p[k], float) for k in _PARAMS}

@@ -35,7 +35,7 @@ class Scene:
     - `validate`: optional ``p -> None`` raising ``ValueError`` that says what to change.
     - `plots`: optional ``(result, outdir) -> list of PNG paths``.
     - `drawing`: optional ``p -> dict`` describing how to draw the mechanism from its named
-      points (see ``jaxmech.plot``): links, ground pivots, slots, chords, traced points.
+      points (see ``jaxmech.drawing``): links, ground pivots, slots, chords, traced points.
     - `document`: the seed document and where its corrections are written down.
     - `parameters`: ``{name: (SI unit, meaning)}`` for every name in `defaults` (what
       ``jaxmech scenes SCENE`` lists, and the unit ``--set`` checks); empty for a scene
