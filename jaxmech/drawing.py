@@ -54,6 +54,7 @@ __all__ = [
     "check_spec",
     "draw_mechanism",
     "drawing_spec",
+    "Drawer",
     "new_figure",
     "plot_poses",
     "point_positions",
@@ -164,8 +165,10 @@ def point_positions(result, names) -> dict:
 
 
 # --------------------------------------------------------------------------- mechanism drawing
-class _Drawer:
-    """Artists for one drawing spec; ``update(i)`` moves them to sample ``i``."""
+class Drawer:
+    """The artists of one drawing spec in an ``Axes``: ``update(i)`` moves them to sample
+    ``i`` of the run, ``set_result(result)`` binds them to another run of the same scene
+    (a changed design: the paths, limits and poses follow) without rebuilding them."""
 
     def __init__(self, result, ax, spec=None, trace=None, labels=False, progressive=False):
         self.result = result
@@ -194,6 +197,7 @@ class _Drawer:
             z = self.pos[n]
             full, = ax.plot(z.real, z.imag, ls="--", lw=0.8, color=f"C{(k + 1) % 10}", alpha=0.6 if self.progressive else 0.9, label=f"path of {n}")
             full.set_gid("trace")
+            self.artists.append(("trace", full, [n]))
             if self.progressive:
                 done, = ax.plot([], [], ls="-", lw=1.5, color=f"C{(k + 1) % 10}")
                 done.set_gid("trace-progress")
@@ -233,7 +237,7 @@ class _Drawer:
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.grid(True, alpha=0.2)
-        self._limits()
+        self.fit_limits()
 
     def _slot(self, s):
         kw = dict(lw=9, color="tab:orange", alpha=0.25, solid_capstyle="round")
@@ -262,7 +266,8 @@ class _Drawer:
         z = c + r * np.exp(1j * th)
         return z.real, z.imag
 
-    def _limits(self):
+    def extent(self) -> np.ndarray:
+        """Every finite drawn position over the stroke (points and slot arcs), complex, m."""
         zs = [v for v in self.pos.values()]
         for s in self.spec.get("slots", ()):
             if "centre" in s:
@@ -270,7 +275,11 @@ class _Drawer:
                     x, y = self._slot_xy(s, i)
                     zs.append(x + 1j * y)
         z = np.concatenate([np.ravel(v) for v in zs]) if zs else np.zeros(1)
-        z = z[np.isfinite(z)]
+        return z[np.isfinite(z)]
+
+    def fit_limits(self):
+        """Axis limits around ``extent()`` with an 8 % margin (equal aspect)."""
+        z = self.extent()
         if z.size == 0:
             return
         x0, x1, y0, y1 = z.real.min(), z.real.max(), z.imag.min(), z.imag.max()
@@ -279,8 +288,23 @@ class _Drawer:
         self.ax.set_xlim(x0 - m, x1 + m)
         self.ax.set_ylim(y0 - m, y1 + m)
 
+    def set_result(self, result, *, limits: bool = True):
+        """Bind to ``result`` (same scene and drawing spec, other parameters): positions,
+        traced paths and (``limits``) the axis limits are recomputed; call ``update(i)`` to
+        draw a pose."""
+        self.result = result
+        self.pos = point_positions(result, spec_points(self.spec) + self.trace)
+        self.u = np.asarray(result.motion.u[:, 0], float)
+        for kind, art, pts in self.artists:
+            if kind == "trace":
+                art.set_data(self.pos[pts[0]].real, self.pos[pts[0]].imag)
+        if limits:
+            self.fit_limits()
+
     def update(self, i: int):
         for kind, art, pts in self.artists:
+            if kind == "trace":
+                continue
             if kind == "segment":
                 art.set_data(*self._xy(pts, i))
             elif kind == "polygon":
@@ -329,7 +353,7 @@ def draw_mechanism(result, index: int = 0, *, ax=None, spec: Mapping | None = No
     i = _index(result, index)
     if ax is None:
         _, (ax,) = new_figure(width=5.5, height=4.5)
-    drawer = _Drawer(result, ax, spec=spec, trace=trace, labels=labels)
+    drawer = Drawer(result, ax, spec=spec, trace=trace, labels=labels)
     drawer.update(i)
     return ax
 
@@ -383,7 +407,7 @@ def animate(
     # A fixed layout: constrained layout would be recomputed for every frame (3x slower).
     fig, (ax,) = new_figure(width=5.5, height=4.5, layout=None, dpi=dpi)
     fig.subplots_adjust(left=0.14, right=0.97, bottom=0.11, top=0.92)
-    drawer = _Drawer(result, ax, spec=spec, trace=trace, progressive=True)
+    drawer = Drawer(result, ax, spec=spec, trace=trace, progressive=True)
     anim = FuncAnimation(fig, drawer.update, frames=list(idx), init_func=lambda: drawer.update(int(idx[0])), interval=1000.0 / fps, blit=False, repeat=True)
     anim.frame_indices = idx  # the samples shown, one per frame
     if path is not None:

@@ -1,0 +1,76 @@
+"""MkDocs hooks of the documentation site (``mkdocs.yml``: ``hooks``).
+
+- Math: ``$$ ... $$`` (display) and ``$ ... $`` (inline) outside code are rendered to
+  MathML at build time (``latex2mathml``), so pages need no script from a CDN and show
+  their equations offline.
+- Seed scene pages (``seeds/NAME.md``) get the scene's parameter table (name, SI unit,
+  default, meaning) from the scene itself (``Scene.parameters``), so the page and the
+  command line (``jaxmech scenes NAME``) cannot disagree.
+"""
+
+from __future__ import annotations
+
+import re
+
+from latex2mathml.converter import convert
+
+_FENCE = re.compile(r"(^```.*?^```[ \t]*$)", re.S | re.M)
+_DISPLAY = re.compile(r"\$\$(.+?)\$\$", re.S)
+_INLINE = re.compile(r"(?<![\\$\w])\$(?!\s)([^$\n]+?)(?<!\s)\$(?![\w$])")
+_CODE_SPAN = re.compile(r"(`+)(.+?)\1")
+
+# seed page -> the scenes it documents
+_SCENES = {
+    "seeds/flap_msd.md": ["flap_msd"],
+    "seeds/landing_gear.md": ["landing_gear"],
+    "seeds/arc_track_flap.md": ["arc_track_flap", "arc_track_flap_landing"],
+    "seeds/sma_flap.md": ["sma_flap"],
+}
+
+
+def _math(text: str) -> str:
+    text = _DISPLAY.sub(lambda m: "\n" + convert(m.group(1).strip(), display="block") + "\n", text)
+
+    def inline(line: str) -> str:
+        parts = _CODE_SPAN.split(line)
+        # split keeps (ticks, body) groups: every 3rd item from 0 is outside code spans
+        out = []
+        for i, part in enumerate(parts):
+            k = i % 3
+            if k == 0:
+                out.append(_INLINE.sub(lambda m: convert(m.group(1)), part))
+            elif k == 2:
+                out.append(parts[i - 1] + part + parts[i - 1])
+        return "".join(out)
+
+    return "\n".join(inline(ln) for ln in text.split("\n"))
+
+
+def render_math(markdown: str) -> str:
+    """Markdown with its math as MathML; fenced code blocks are left as they are."""
+    pieces = _FENCE.split(markdown)
+    return "".join(p if i % 2 else _math(p) for i, p in enumerate(pieces))
+
+
+def _parameter_table(name: str) -> str:
+    from jaxmech.scenes import get_scene
+    from jaxmech.units import for_reading
+
+    scene = get_scene(name)
+    rows = ["| parameter | unit | default | meaning |", "|---|---|---|---|"]
+    for k, v in scene.defaults.items():
+        unit, meaning = scene.parameters[k]
+        shown = f"{float(v):.6g}"
+        deg, dunit = for_reading(float(v), unit)
+        if dunit != unit:
+            shown += f" ({deg:.6g} {dunit})"
+        rows.append(f"| `{k}` | {unit} | {shown} | {meaning.replace('|', '&#124;')} |")
+    return (f"\n\n## Scene `{name}`\n\n{scene.summary}.\n\n`jaxmech run {name}` runs it; "
+            f"`jaxmech scenes {name}` prints this table.\n\n" + "\n".join(rows) + "\n")
+
+
+def on_page_markdown(markdown, page, config, files):
+    markdown = render_math(markdown)
+    for name in _SCENES.get(page.file.src_uri, ()):
+        markdown += _parameter_table(name)
+    return markdown
