@@ -3,6 +3,8 @@
 - Math: ``$$ ... $$`` (display) and ``$ ... $`` (inline) outside code are rendered to
   MathML at build time (``latex2mathml``), so pages need no script from a CDN and show
   their equations offline.
+- The benchmarks page gets its tables from ``benchmarks/results/*.json``
+  (``benchmarks.summary``), rendered at build time.
 - Seed scene pages (``seeds/NAME.md``) get the scene's parameter table (name, SI unit,
   default, meaning) from the scene itself (``Scene.parameters``), so the page and the
   command line (``jaxmech scenes NAME``) cannot disagree.
@@ -10,9 +12,16 @@
 
 from __future__ import annotations
 
+import json
 import re
+import sys
+from pathlib import Path
 
 from latex2mathml.converter import convert
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # benchmarks/ (and jaxmech/ from a plain checkout) import from the root
+    sys.path.insert(0, str(ROOT))
 
 _FENCE = re.compile(r"(^```.*?^```[ \t]*$)", re.S | re.M)
 _DISPLAY = re.compile(r"\$\$(.+?)\$\$", re.S)
@@ -69,7 +78,30 @@ def _parameter_table(name: str) -> str:
             f"`jaxmech scenes {name}` prints this table.\n\n" + "\n".join(rows) + "\n")
 
 
+def _live_table() -> str:
+    path = ROOT / "benchmarks" / "results" / "live.json"
+    if not path.exists():
+        return "_not run yet: `python -m benchmarks.live`_"
+    doc = json.loads(path.read_text())
+    p, q, m = doc["parameter_update"], doc["pose_update"], doc["machine"]
+    return "\n".join([
+        "| update | median (ms) | p95 (ms) | samples |", "|---|---:|---:|---:|",
+        f"| a parameter moved (scene run + redraw + PNG) | {p['median_ms']:.1f} | {p['p95_ms']:.1f} | {p['n']} |",
+        f"| the pose moved (redraw + PNG) | {q['median_ms']:.1f} | {q['p95_ms']:.1f} | {q['n']} |",
+        "",
+        f"First call (the compile) {doc['first_call_s']:.1f} s; an unassemblable design answered in "
+        f"{doc['unassemblable_update_ms']:.0f} ms.  {m.get('cpu_count')} cores, load average "
+        f"{', '.join(f'{x:.1f}' for x in doc['load_average_after'])} (1, 5, 15 min), {m['date']}.",
+    ])
+
+
 def on_page_markdown(markdown, page, config, files):
+    if page.file.src_uri == "benchmarks.md":
+        from benchmarks.summary import render
+
+        markdown = markdown.replace("<!-- benchmarks:live -->", _live_table())
+        markdown = markdown.replace("<!-- benchmarks:tables -->", "## Tables" + render().removeprefix("## Benchmarks"))
+        return markdown
     markdown = render_math(markdown)
     for name in _SCENES.get(page.file.src_uri, ()):
         markdown += _parameter_table(name)
