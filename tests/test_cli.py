@@ -115,7 +115,9 @@ def test_every_scene_describes_every_parameter():
 
 # ----------------------------------------------------------------------- run
 def test_run_writes_csv_plots_and_summary(tmp_path):
-    proc = jaxmech("run", "fourbar", "--set", "d=3.4", "--out", tmp_path)
+    """``--set d=340cm`` is d = 3.4 m (a value with its unit); the CSV is SI, the summary
+    reads angles in degrees and says what was changed."""
+    proc = jaxmech("run", "fourbar", "--set", "d=340cm", "--out", tmp_path)
     assert proc.returncode == 0, proc.stderr
     head, data = read_csv(tmp_path / "fourbar.csv")
     assert head == FOURBAR_COLUMNS
@@ -128,19 +130,12 @@ def test_run_writes_csv_plots_and_summary(tmp_path):
         with Image.open(tmp_path / f"fourbar_{kind}.png") as im:
             assert im.format == "PNG"
     assert "scene fourbar" in proc.stdout and "status: {'CONVERGED': 101}" in proc.stdout
+    assert "changed from the defaults: d = 3.4 m" in proc.stdout
+    row = next(ln.split() for ln in proc.stdout.splitlines() if ln.startswith("theta2[deg]"))
+    assert float(row[1]) == 0.0 and float(row[2]) == pytest.approx(360.0, rel=1e-12)  # one crank turn, in degrees
+    row = next(ln.split() for ln in proc.stdout.splitlines() if ln.startswith("theta4[deg]"))
+    assert float(row[1]) == pytest.approx(math.degrees(data[:, 7].min()), rel=1e-5)  # the CSV's radians, read in degrees
     assert f"wrote {tmp_path / 'fourbar.csv'}" in proc.stdout
-
-
-def test_set_takes_a_unit(tmp_path, capsys):
-    """``--set d=340cm`` is d = 3.4 m: the same theta4 as the closed form; the summary says
-    what was changed (in the reader's units)."""
-    assert main(["run", "fourbar", "--set", "d=340cm", "--points", "2", "--out", str(tmp_path)]) == 0
-    head, data = read_csv(tmp_path / "fourbar.csv")
-    assert abs(data[0, head.index("theta4[rad]")] - theta4_at_zero(1.0, 3.0, 2.5, 3.4)) < POS_TOL
-    out = capsys.readouterr().out
-    assert "changed from the defaults: d = 3.4 m" in out
-    row = next(ln.split() for ln in out.splitlines() if ln.startswith("theta2[deg]"))
-    assert float(row[1]) == 0.0 and float(row[2]) == pytest.approx(360.0, rel=1e-12)  # summary in degrees
 
 
 ERRORS = {
