@@ -42,6 +42,8 @@ class LiveView:
     - `index`: the sample whose pose is drawn.
     - `figure`, `drawer`: the figure and the mechanism's artists.
     - `png`: the figure rendered by the last update (bytes).
+    - `full_renders`: how many renders redrew the axes (limits changed) rather than
+      only the moving artists.
     """
 
     scene: Scene
@@ -59,6 +61,7 @@ class LiveView:
     status_text: object
     png: bytes = b""
     background: object = None
+    full_renders: int = 0
 
 
 def live_view(scene: str | Scene = "flap_msd", *, points: int = 61, output: str = "torque", index: int | None = None,
@@ -126,6 +129,7 @@ def _render(view: LiveView, *, full: bool) -> None:
             a.set_animated(True)
         canvas.draw()  # everything but the animated artists
         view.background = canvas.copy_from_bbox(view.figure.bbox)
+        view.full_renders += 1
     else:
         canvas.restore_region(view.background)
     for a in _dynamic(view):
