@@ -20,8 +20,15 @@ from pathlib import Path
 from latex2mathml.converter import convert
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # benchmarks/ (and jaxmech/ from a plain checkout) import from the root
-    sys.path.insert(0, str(ROOT))
+# benchmarks/ imports from the repository root; MkDocs restores sys.path after loading a
+# hook, so what the hook needs is imported now.
+sys.path.insert(0, str(ROOT))
+try:
+    from benchmarks.summary import render as render_benchmarks
+    from jaxmech.scenes import get_scene
+    from jaxmech.units import for_reading
+finally:
+    sys.path.remove(str(ROOT))
 
 _FENCE = re.compile(r"(^```.*?^```[ \t]*$)", re.S | re.M)
 _DISPLAY = re.compile(r"\$\$(.+?)\$\$", re.S)
@@ -62,9 +69,6 @@ def render_math(markdown: str) -> str:
 
 
 def _parameter_table(name: str) -> str:
-    from jaxmech.scenes import get_scene
-    from jaxmech.units import for_reading
-
     scene = get_scene(name)
     rows = ["| parameter | unit | default | meaning |", "|---|---|---|---|"]
     for k, v in scene.defaults.items():
@@ -97,10 +101,8 @@ def _live_table() -> str:
 
 def on_page_markdown(markdown, page, config, files):
     if page.file.src_uri == "benchmarks.md":
-        from benchmarks.summary import render
-
         markdown = markdown.replace("<!-- benchmarks:live -->", _live_table())
-        markdown = markdown.replace("<!-- benchmarks:tables -->", "## Tables" + render().removeprefix("## Benchmarks"))
+        markdown = markdown.replace("<!-- benchmarks:tables -->", "## Tables" + render_benchmarks().removeprefix("## Benchmarks"))
         return markdown
     markdown = render_math(markdown)
     for name in _SCENES.get(page.file.src_uri, ()):
