@@ -2,7 +2,7 @@
 
 - Math: ``$$ ... $$`` (display) and ``$ ... $`` (inline) outside code are rendered to
   MathML at build time (``latex2mathml``), so pages need no script from a CDN and show
-  their equations offline.
+  their equations offline (browsers draw MathML natively).
 - The benchmarks page gets its tables from ``benchmarks/results/*.json``
   (``benchmarks.summary``), rendered at build time.
 - Seed scene pages (``seeds/NAME.md``) get the scene's parameter table (name, SI unit,
@@ -44,8 +44,14 @@ _SCENES = {
 }
 
 
-def _math(text: str) -> str:
-    text = _DISPLAY.sub(lambda m: "\n" + convert(m.group(1).strip(), display="block") + "\n", text)
+def _math(text: str, stash: list) -> str:
+    def keep(mathml: str) -> str:
+        # a plain word in the Markdown, swapped for the MathML in the HTML (on_page_content):
+        # the Markdown parser neither splits a paragraph at <math> nor reads '*' inside it
+        stash.append(mathml)
+        return f"jaxmechmath{len(stash) - 1}x"
+
+    text = _DISPLAY.sub(lambda m: "\n\n" + keep(convert(m.group(1).strip(), display="block")) + "\n\n", text)
 
     def inline(line: str) -> str:
         parts = _CODE_SPAN.split(line)
@@ -54,7 +60,7 @@ def _math(text: str) -> str:
         for i, part in enumerate(parts):
             k = i % 3
             if k == 0:
-                out.append(_INLINE.sub(lambda m: convert(m.group(1)), part))
+                out.append(_INLINE.sub(lambda m: keep(convert(m.group(1))), part))
             elif k == 2:
                 out.append(parts[i - 1] + part + parts[i - 1])
         return "".join(out)
@@ -62,10 +68,21 @@ def _math(text: str) -> str:
     return "\n".join(inline(ln) for ln in text.split("\n"))
 
 
-def render_math(markdown: str) -> str:
-    """Markdown with its math as MathML; fenced code blocks are left as they are."""
+_STASH: dict[str, list] = {}
+_PLACEHOLDER = re.compile(r"(<p>)?jaxmechmath(\d+)x(</p>)?")
+
+
+def render_math(markdown: str, stash: list) -> str:
+    """Markdown with its math replaced by placeholders (the MathML appended to ``stash``);
+    fenced code blocks are left as they are."""
     pieces = _FENCE.split(markdown)
-    return "".join(p if i % 2 else _math(p) for i, p in enumerate(pieces))
+    return "".join(p if i % 2 else _math(p, stash) for i, p in enumerate(pieces))
+
+
+def on_page_content(html, page, config, files):
+    stash = _STASH.pop(page.file.src_uri, [])
+    return _PLACEHOLDER.sub(lambda m: stash[int(m.group(2))] if m.group(1) and m.group(3)
+                            else (m.group(1) or "") + stash[int(m.group(2))] + (m.group(3) or ""), html)
 
 
 def _parameter_table(name: str) -> str:
@@ -104,7 +121,8 @@ def on_page_markdown(markdown, page, config, files):
         markdown = markdown.replace("<!-- benchmarks:live -->", _live_table())
         markdown = markdown.replace("<!-- benchmarks:tables -->", "## Tables" + render_benchmarks().removeprefix("## Benchmarks"))
         return markdown
-    markdown = render_math(markdown)
+    _STASH[page.file.src_uri] = stash = []
+    markdown = render_math(markdown, stash)
     for name in _SCENES.get(page.file.src_uri, ()):
         markdown += _parameter_table(name)
     return markdown
