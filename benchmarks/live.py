@@ -60,6 +60,7 @@ def run(quick: bool) -> dict:
     bad = update(view, d=0.5 * float(defaults["d"]))  # a design that cannot be assembled
     bad_ms = 1e3 * (time.perf_counter() - t)
     params = _stats(params_ms)
+    ok = np.asarray(statuses)
     return {
         "scene": "flap_msd", "points": view.points, "parameters_moved": list(NAMES),
         "first_call_s": first_s,
@@ -67,6 +68,8 @@ def run(quick: bool) -> dict:
         "pose_update": _stats(pose_ms),
         "unassemblable_update_ms": bad_ms, "unassemblable_status": bad,
         "assembled_fraction": float(np.mean(statuses)),
+        "parameter_update_assembled": _stats(np.asarray(params_ms)[ok]),
+        "parameter_update_unassemblable": _stats(np.asarray(params_ms)[~ok]) if (~ok).any() else None,
         "full_redraw_fraction": (view.full_renders - full0) / n,  # limits changed: axes redrawn too
         "target_ms": TARGET_MS, "median_under_target": params["median_ms"] < TARGET_MS,
         "load_average_before": load_before, "load_average_after": list(os.getloadavg()),

@@ -2,9 +2,10 @@
 output curve (the driving torque) redrawn at once.
 
 A ``LiveView`` holds one figure (the mechanism on the left, an output against the input on
-the right) whose artists are built once; ``update(view, **params)`` runs the scene with the
-changed parameters (``run_scene``: the compiled stroke program is reused, only numbers
-change), moves the artists and renders the figure to PNG.  It is a plain function: a
+the right) whose artists are built once; ``update(view, **params)`` evaluates the scene with
+the changed parameters (``evaluate``: the stroke, its kinematics and the scene's outputs as
+one compiled program of the parameters, so a change costs no Python-level work per array),
+moves the artists and renders the figure to PNG.  It is a plain function: a
 notebook calls it from a widget callback (``sliders`` builds ipywidgets sliders for it),
 and ``benchmarks/live.py`` times it without a browser.
 
@@ -16,18 +17,61 @@ line, as the returned string and in red on the figure.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import io
 from collections.abc import Mapping, Sequence
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
 from .drawing import Drawer, new_figure
-from .scenes import Scene, get_scene, run_scene
-from .status import status_counts
+from .scenes import Scene, SceneResult, get_scene
+from .status import Status, status_counts
+from .sweep import design_motion
 from .units import for_reading
 
-__all__ = ["LiveView", "live_view", "update", "sliders"]
+__all__ = ["LiveView", "live_view", "update", "sliders", "evaluate"]
+
+# The outputs' units (strings cannot leave a compiled program), recorded when it is traced.
+_OUTPUT_UNITS: dict = {}
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _evaluate(scene: Scene, points: int, p):
+    mo, ok = design_motion(scene, points, p)
+    outs = scene.outputs(p, mo) if scene.outputs is not None else {}
+    _OUTPUT_UNITS[scene.name] = {k: unit for k, (_, unit) in outs.items()}
+
+    def nan(x):  # failed samples: NaN for drawing, as run_scene gives them
+        return jnp.where(jnp.reshape(ok, (-1,) + (1,) * (x.ndim - 1)), x, jnp.nan)
+
+    mo = dataclasses.replace(mo, q=nan(mo.q), q_dot=nan(mo.q_dot), q_ddot=nan(mo.q_ddot), dq_du=nan(mo.dq_du),
+                             d2q_du2=nan(mo.d2q_du2), points=jax.tree_util.tree_map(nan, mo.points))
+    return mo, {k: nan(jnp.asarray(v)) for k, (v, _) in outs.items()}
+
+
+def evaluate(scene: Scene, points: int, params: Mapping) -> SceneResult:
+    """``run_scene(scene, points, **params)`` as one compiled program of the parameters
+    (compiled once per scene and ``points``; later calls only pass numbers).
+
+    **Returns** the ``SceneResult`` (failed samples NaN).  **Raises** ``ValueError`` as
+    ``run_scene`` does: a bad value (``scene.params``) or a design that cannot be assembled
+    over its stroke (an infeasible or non-finite sample), saying where it fails.
+    """
+    p = scene.params(**params)
+    mo, outs = _evaluate(scene, points, {k: jnp.asarray(v, float) for k, v in p.items()})
+    status = np.asarray(mo.status)
+    bad = np.flatnonzero((status == Status.INFEASIBLE) | (status == Status.NONFINITE))
+    if bad.size:
+        uname = scene.mechanism.inputs[0]
+        u, unit = for_reading(float(mo.u[bad[0], 0]), scene.units[uname])
+        raise ValueError(f"scene {scene.name!r} cannot be assembled over its stroke with these parameters: {bad.size} "
+                         f"of {points} positions fail, first at {uname} = {u:.6g} {unit} ({status_counts(status)}); "
+                         f"change the link lengths or the stroke")
+    units = _OUTPUT_UNITS[scene.name]
+    return SceneResult(scene=scene, params=p, motion=mo, outputs={k: (v, units[k]) for k, v in outs.items()})
 
 
 @dataclasses.dataclass(eq=False)
@@ -42,6 +86,7 @@ class LiveView:
     - `index`: the sample whose pose is drawn.
     - `figure`, `drawer`: the figure and the mechanism's artists.
     - `png`: the figure rendered by the last update (bytes).
+    - `ran`: the parameters last run (a pose change with the same ones runs nothing).
     - `full_renders`: how many renders redrew the axes (limits changed) rather than
       only the moving artists.
     """
@@ -62,6 +107,7 @@ class LiveView:
     png: bytes = b""
     background: object = None
     full_renders: int = 0
+    ran: dict | None = None
 
 
 def live_view(scene: str | Scene = "flap_msd", *, points: int = 61, output: str = "torque", index: int | None = None,
@@ -79,7 +125,7 @@ def live_view(scene: str | Scene = "flap_msd", *, points: int = 61, output: str 
     **Raises** ``ValueError`` for an unknown scene or output, or if the defaults fail.
     """
     scene = get_scene(scene) if isinstance(scene, str) else scene
-    result = run_scene(scene, points)
+    result = evaluate(scene, points, {})
     if output not in result.outputs:
         raise ValueError(f"scene {scene.name!r} has no output {output!r}; outputs: {list(result.outputs)}")
     fig, (ax_m, ax_o) = new_figure(1, 2, width=width / 2, height=height, sharex=False, layout=None, dpi=dpi)
@@ -96,7 +142,7 @@ def live_view(scene: str | Scene = "flap_msd", *, points: int = 61, output: str 
     status_text = fig.text(0.5, 0.95, "", ha="center", va="center", fontsize=9)
     view = LiveView(scene=scene, points=points, output=output, params=dict(result.params), result=result,
                     status="", ok=True, index=i, figure=fig, drawer=drawer, curve=curve, marker=marker,
-                    status_text=status_text)
+                    status_text=status_text, ran=dict(result.params))
     update(view)
     _render(view, full=True)
     return view
@@ -158,7 +204,13 @@ def update(view: LiveView, index: int | None = None, **params) -> str:
     full = False
     try:
         # the pose slider changes no parameter: nothing to solve again
-        result = view.result if view.params == view.result.params and view.ok else run_scene(view.scene, view.points, **view.params)
+        if view.params == view.ran:
+            if not view.ok:
+                raise ValueError(view.status.removeprefix("cannot draw this design: "))
+            result = view.result
+        else:
+            view.ran = dict(view.params)
+            result = evaluate(view.scene, view.points, view.params)
     except ValueError as e:  # unassemblable design or bad value: shown, not raised
         view.ok, view.status = False, f"cannot draw this design: {' '.join(str(e).split())}"
     else:
