@@ -277,14 +277,14 @@ class Drawer:
         z = np.concatenate([np.ravel(v) for v in zs]) if zs else np.zeros(1)
         return z[np.isfinite(z)]
 
-    def fit_limits(self):
-        """Axis limits around ``extent()`` with an 8 % margin (equal aspect)."""
+    def fit_limits(self, margin: float = 0.08):
+        """Axis limits around ``extent()`` with a ``margin`` (fraction of the larger span)."""
         z = self.extent()
         if z.size == 0:
             return
         x0, x1, y0, y1 = z.real.min(), z.real.max(), z.imag.min(), z.imag.max()
         span = max(x1 - x0, y1 - y0, 1e-12)
-        m = 0.08 * span
+        m = margin * span
         self.ax.set_xlim(x0 - m, x1 + m)
         self.ax.set_ylim(y0 - m, y1 + m)
 

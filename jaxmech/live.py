@@ -220,14 +220,15 @@ def update(view: LiveView, index: int | None = None, **params) -> str:
         drawer.set_result(result, limits=False)
         z = drawer.extent()
         if not (_inside(drawer.ax.get_xlim(), z.real, shrink=0.0) and _inside(drawer.ax.get_ylim(), z.imag, shrink=0.0)):
-            drawer.fit_limits()
+            drawer.fit_limits(0.2)  # room to move: fewer refits (each redraws the axes)
             full = True
         x, _ = for_reading(np.asarray(result.motion.u[:, 0], float), view.scene.units[result.input_name])
         y, _ = for_reading(np.asarray(result.outputs[view.output][0], float), result.outputs[view.output][1])
         view.curve.set_data(x, y)
         ax = view.curve.axes
-        if not (_inside(ax.get_xlim(), x, shrink=0.0) and _inside(ax.get_ylim(), y)):
+        if not (_inside(ax.get_xlim(), x, shrink=0.0) and _inside(ax.get_ylim(), y, shrink=0.1)):
             ax.relim()
+            ax.margins(y=0.25)  # room to move: fewer refits (each redraws the axes)
             ax.autoscale_view()
             full = True
     view.drawer.update(view.index)
