@@ -124,8 +124,10 @@ def live_view(scene: str | Scene = "flap_msd", *, points: int = 61, output: str 
 
     **Raises** ``ValueError`` for an unknown scene or output, or if the defaults fail.
     """
+    if int(points) < 2:
+        raise ValueError(f"points must be at least 2 (both ends of the stroke), got {points}")
     scene = get_scene(scene) if isinstance(scene, str) else scene
-    result = evaluate(scene, points, {})
+    result = evaluate(scene, int(points), {})
     if output not in result.outputs:
         raise ValueError(f"scene {scene.name!r} has no output {output!r}; outputs: {list(result.outputs)}")
     fig, (ax_m, ax_o) = new_figure(1, 2, width=width / 2, height=height, sharex=False, layout=None, dpi=dpi)
