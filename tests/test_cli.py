@@ -113,6 +113,16 @@ def test_every_scene_describes_every_parameter():
         assert all(unit and meaning for unit, meaning in scene.parameters.values()), name
 
 
+def test_a_scene_must_describe_exactly_its_parameters():
+    import dataclasses
+
+    from jaxmech.scenes import get_scene
+
+    scene = get_scene("fourbar")
+    with pytest.raises(ValueError, match=r"undescribed \['b', 'c', 'd'\], not a default \['e'\]"):
+        dataclasses.replace(scene, parameters={"a": ("m", "crank"), "e": ("m", "not a parameter")})
+
+
 # ----------------------------------------------------------------------- run
 def test_run_writes_csv_plots_and_summary(tmp_path):
     """``--set d=340cm`` is d = 3.4 m (a value with its unit); the CSV is SI, the summary
