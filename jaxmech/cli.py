@@ -1,7 +1,7 @@
 """The ``jaxmech`` command: list, run, animate, sweep and report the scenes.
 
 ```
-jaxmech scenes
+jaxmech scenes [SCENE]
 jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR]
 jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.html]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
@@ -9,7 +9,8 @@ jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ...] [--seed S] [--fig
 jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
 ```
 
-Values are SI (m, rad, s, kg, N).  The command is an application, not the library: it
+Values are SI (m, rad, s, kg, N); a ``--set`` value may carry a unit instead
+(``--set alpha0=65deg``, ``--set a1=275mm``), which is checked against the parameter's.  The command is an application, not the library: it
 runs JAX in float64 and keeps compiled kernels in a persistent cache
 (``$XDG_CACHE_HOME/jaxmech/xla``, default ``~/.cache/jaxmech/xla``; set
 ``JAX_COMPILATION_CACHE_DIR`` to move it), which makes a second run several times faster.
@@ -54,23 +55,41 @@ def _setup_jax():
 
 
 # --------------------------------------------------------------------------- argument parsing
-def _parse_set(items) -> dict[str, float]:
-    """``["a=1.5", ...]`` -> ``{"a": 1.5}``; ``UsageError`` for a bad item."""
-    out: dict[str, float] = {}
+def _parse_set(items) -> dict[str, str]:
+    """``["a=1.5", "b=20deg"]`` -> ``{"a": "1.5", "b": "20deg"}``, the syntax checked (a
+    number first, finite; each name once); ``UsageError`` for a bad item.  Names and
+    units are checked against the scene by ``_overrides``."""
+    from .units import split_quantity
+
+    out: dict[str, str] = {}
     for item in items or ():
         name, sep, value = item.partition("=")
         name = name.strip()
         if not sep or not name:
             raise UsageError(f"--set expects NAME=VALUE, got {item!r}")
         try:
-            v = float(value)
+            v, _ = split_quantity(value)
         except ValueError:
-            raise UsageError(f"--set {name}: {value!r} is not a number (SI units: m, rad, s, kg, N)") from None
+            raise UsageError(f"--set {name}: {value!r} is not a number (SI units: m, rad, s, kg, N; or a number with its unit, e.g. 65deg)") from None
         if not np.isfinite(v):
             raise UsageError(f"--set {name}: value must be finite, got {value!r}")
         if name in out:
             raise UsageError(f"--set {name} is given twice")
-        out[name] = v
+        out[name] = value
+    return out
+
+
+def _overrides(scene, raw: dict[str, str]) -> dict[str, float]:
+    """``--set`` values in SI for ``scene``: every name a parameter of it (else the closest
+    valid name), every unit one that fits the parameter's."""
+    from .units import to_si
+
+    out = {}
+    for name, text in raw.items():
+        try:
+            out[name] = to_si(text, scene.unit(name))
+        except ValueError as e:
+            raise UsageError(f"--set {name}: {e}" if name in scene.defaults else str(e)) from None
     return out
 
 
@@ -154,7 +173,13 @@ def _parser() -> _Parser:
     )
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
 
-    sub.add_parser("scenes", help="list the scenes, one per line", description="List the scenes, one line each: name and summary.")
+    sc = sub.add_parser(
+        "scenes",
+        help="list the scenes, or the parameters of one",
+        description="List the scenes, one line each: name and summary; with SCENE, list its parameters "
+        "(name, SI unit, default, meaning).",
+    )
+    sc.add_argument("scene", metavar="SCENE", nargs="?", default=None, help="a scene whose parameters to list")
 
     r = sub.add_parser(
         "run",
@@ -163,7 +188,7 @@ def _parser() -> _Parser:
         "and the scene's plots as PNG; print the summary table.",
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
-    r.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI units); repeatable")
+    r.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable; 'jaxmech scenes SCENE' lists them")
     r.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
     r.add_argument("--out", default="jaxmech-out", metavar="DIR", help="output folder (default ./jaxmech-out)")
 
@@ -173,7 +198,7 @@ def _parser() -> _Parser:
         description="Animate SCENE over its stroke, with the paths of its traced points, to a GIF (Pillow) or a self-contained HTML player.",
     )
     a.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
-    a.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI units); repeatable")
+    a.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable")
     a.add_argument("--frames", type=_positive("--frames"), default=60, metavar="N", help="number of frames (default 60)")
     a.add_argument("--fps", type=_positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
     a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif or FILE.html (default ./SCENE.gif)")
@@ -228,6 +253,7 @@ def _scene(name):
 def _run(scene, points, overrides):
     from .scenes import run_scene
 
+    overrides = _overrides(scene, overrides)
     try:
         return run_scene(scene, points=points, **overrides)
     except ValueError as e:
@@ -264,6 +290,9 @@ def _write_run(result, outdir: Path) -> list[Path]:
 def _cmd_scenes(args) -> int:
     from .scenes import get_scene, scene_names
 
+    if args.scene is not None:
+        print(_scene(args.scene).describe())
+        return 0
     names = scene_names()
     width = max(map(len, names), default=0)
     for n in names:

@@ -79,9 +79,46 @@ def test_top_level_help_as_a_command():
         assert verb in proc.stdout
 
 
+def test_scene_lists_its_parameters_with_units_and_defaults():
+    """``jaxmech scenes SCENE``: one row per parameter (name, SI unit, default, meaning), the
+    defaults equal to the scene's own and angles also shown in degrees."""
+    from jaxmech.scenes import get_scene
+
+    proc = jaxmech("scenes", "arc_track_flap")
+    assert proc.returncode == 0, proc.stderr
+    scene = get_scene("arc_track_flap")
+    rows = {ln.split()[0]: ln.split() for ln in proc.stdout.splitlines()[5:]}
+    assert list(rows) == list(scene.defaults)
+    assert rows["a1"][1] == "m" and float(rows["a1"][2]) == pytest.approx(0.275, rel=1e-6)
+    assert rows["alpha0"][1] == "rad" and rows["alpha0"][3:5] == ["(65", "deg)"]  # the thesis's 65 deg
+    assert rows["M12_i"][1:4] == ["N", "m", "750"]
+    assert proc.stdout.splitlines()[0].startswith("arc_track_flap: ") and "cruise" in proc.stdout.splitlines()[0]
+
+
+def test_every_scene_describes_every_parameter():
+    from jaxmech.scenes import get_scene
+
+    for name in scene_names():
+        scene = get_scene(name)
+        assert list(scene.parameters) == list(scene.defaults), name
+        assert all(unit and meaning for unit, meaning in scene.parameters.values()), name
+
+
+def test_a_scene_must_describe_exactly_its_parameters():
+    import dataclasses
+
+    from jaxmech.scenes import get_scene
+
+    scene = get_scene("fourbar")
+    with pytest.raises(ValueError, match=r"undescribed \['b', 'c', 'd'\], not a default \['e'\]"):
+        dataclasses.replace(scene, parameters={"a": ("m", "crank"), "e": ("m", "not a parameter")})
+
+
 # ----------------------------------------------------------------------- run
 def test_run_writes_csv_plots_and_summary(tmp_path):
-    proc = jaxmech("run", "fourbar", "--set", "d=3.4", "--out", tmp_path)
+    """``--set d=340cm`` is d = 3.4 m (a value with its unit); the CSV is SI, the summary
+    reads angles in degrees and says what was changed."""
+    proc = jaxmech("run", "fourbar", "--set", "d=340cm", "--out", tmp_path)
     assert proc.returncode == 0, proc.stderr
     head, data = read_csv(tmp_path / "fourbar.csv")
     assert head == FOURBAR_COLUMNS
@@ -94,6 +131,11 @@ def test_run_writes_csv_plots_and_summary(tmp_path):
         with Image.open(tmp_path / f"fourbar_{kind}.png") as im:
             assert im.format == "PNG"
     assert "scene fourbar" in proc.stdout and "status: {'CONVERGED': 101}" in proc.stdout
+    assert "changed from the defaults: d = 3.4 m" in proc.stdout
+    row = next(ln.split() for ln in proc.stdout.splitlines() if ln.startswith("theta2[deg]"))
+    assert float(row[1]) == 0.0 and float(row[2]) == pytest.approx(360.0, rel=1e-12)  # one crank turn, in degrees
+    row = next(ln.split() for ln in proc.stdout.splitlines() if ln.startswith("theta4[deg]"))
+    assert float(row[1]) == pytest.approx(math.degrees(data[:, 7].min()), rel=1e-5)  # the CSV's radians, read in degrees
     assert f"wrote {tmp_path / 'fourbar.csv'}" in proc.stdout
 
 
@@ -107,15 +149,18 @@ MISTAKES = {
     "unknown scene": (["run", "fivebar"], "unknown scene 'fivebar'"),
     "unknown scene, other case": (["run", "FOURBAR"], "unknown scene 'FOURBAR'"),
     "unknown scene to sweep": (["sweep", "fivebar", "--grid", "a=1:2:3"], "unknown scene 'fivebar'"),
+    "misspelt parameter": (["run", "arc_track_flap", "--set", "M12i=220"], "has no parameter 'M12i'; did you mean 'M12_i'?"),
+    "wrong unit": (["run", "arc_track_flap", "--set", "alpha0=65mm"], "--set alpha0: unit 'mm' does not fit a quantity in rad"),
+    "misspelt scene to describe": (["scenes", "arc_track"], "unknown scene 'arc_track'"),
     "report unknown scene": (["report", "--scenes", "fivebar"], "unknown scene(s) ['fivebar']"),
-    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter(s) ['e']"),
-    "a coordinate is not a parameter": (["run", "fourbar", "--set", "theta3=1"], "has no parameter(s) ['theta3']"),
-    "parameter in the wrong case": (["animate", "fourbar", "--set", "A=1"], "has no parameter(s) ['A']"),
+    "unknown parameter": (["run", "fourbar", "--set", "e=1"], "has no parameter 'e'; its parameters are: a, b, c, d"),
+    "a coordinate is not a parameter": (["run", "fourbar", "--set", "theta3=1"], "has no parameter 'theta3'"),
+    "parameter in the wrong case": (["animate", "fourbar", "--set", "A=1"], "has no parameter 'A'"),
     "unknown grid parameter": (["sweep", "fourbar", "--grid", "z=1:2:3"], "has no parameter(s) ['z']"),
     # values and units
     "bad value": (["run", "fourbar", "--set", "a=one"], "'one' is not a number"),
-    "value with a unit": (["run", "fourbar", "--set", "a=1mm"], "'1mm' is not a number (SI units"),
-    "value in degrees": (["run", "fourbar", "--set", "a=10deg"], "'10deg' is not a number (SI units"),
+    "value with a unit of another quantity": (["run", "fourbar", "--set", "a=1kg"], "--set a: unit 'kg' does not fit a quantity in m"),
+    "value in degrees": (["run", "fourbar", "--set", "a=10deg"], "--set a: unit 'deg' does not fit a quantity in m"),
     "empty value": (["run", "fourbar", "--set", "a="], "'' is not a number"),
     "infinite value": (["run", "fourbar", "--set", "a=inf"], "value must be finite, got 'inf'"),
     "value that overflows": (["run", "fourbar", "--set", "a=1e400"], "value must be finite, got '1e400'"),
@@ -168,7 +213,7 @@ MISTAKES = {
     "extra argument": (["run", "fourbar", "extra"], "unrecognized arguments: extra"),
     "report without scene names": (["report", "--scenes"], "expected at least one argument"),
 }
-AS_A_USER = ["unknown scene", "value with a unit", "unassemblable four-bar", "grid too large"]
+AS_A_USER = ["unknown scene", "value with a unit of another quantity", "unassemblable four-bar", "grid too large"]
 NUMPY_REPR = ("np.", "array(", "float64(", "dtype(")  # what a person must never read in a message
 
 

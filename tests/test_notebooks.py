@@ -50,9 +50,21 @@ def test_kernel_is_this_interpreter(tmp_path):
     assert Path(printed).resolve() == Path(sys.executable).resolve()
 
 
+def _kinds(nb) -> list[list[str]]:
+    """Per code cell, the kinds of its outputs: a stream's name, a result's mime types.
+    Consecutive pieces of one stream count once (the kernel splits a stream by timing)."""
+    out = []
+    for c in nb.cells:
+        if c.cell_type == "code":
+            kinds = [o.get("name") or "+".join(sorted(o.get("data", {}))) or o["output_type"] for o in c.outputs]
+            out.append([k for i, k in enumerate(kinds) if i == 0 or k != kinds[i - 1] or k not in ("stdout", "stderr")])
+    return out
+
+
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs(path, tmp_path):
     nb = nbformat.read(path, as_version=4)
+    committed = _kinds(nb)  # the notebooks are committed executed, for the documentation site
     first = next(c for c in nb.cells if c.cell_type == "code")
     assert 'jax.config.update("jax_enable_x64", True)' in first.source, "x64 is switched on in the first code cell"
     elapsed = _execute(nb, tmp_path)
@@ -60,3 +72,7 @@ def test_notebook_runs(path, tmp_path):
     assert elapsed < TIMEOUT, f"{path.name} took {elapsed:.0f} s"
     assert _stderr(nb) == [], f"{path.name} wrote to stderr (a warning?): {_stderr(nb)}"
     assert list(tmp_path.iterdir()) == [], f"{path.name} wrote files: {list(tmp_path.iterdir())}"
+    assert _kinds(nb) == committed, (
+        f"{path.name}: the committed outputs are not what the notebook gives now (a plot or a print added or "
+        f"lost); run 'python scripts/execute_notebooks.py {path.stem}'"
+    )

@@ -39,21 +39,23 @@ def _by_gid(ax, gid):
 def test_coordinates_one_axes_per_unit(fourbar, slider):
     fig = plot.plot_coordinates(fourbar)
     (ax,) = fig.axes
-    assert ax.get_xlabel() == "theta2 [rad]"
-    assert ax.get_ylabel() == "position [rad]"
+    assert ax.get_xlabel() == "theta2 [deg]"  # angles are read in degrees; the CSV stays SI
+    assert ax.get_ylabel() == "position [deg]"
     lines = ax.get_lines()
     assert [ln.get_label() for ln in lines] == ["theta3", "theta4"]
-    np.testing.assert_array_equal(lines[1].get_ydata(), np.asarray(fourbar.motion.q[:, 1]))
-    np.testing.assert_array_equal(lines[1].get_xdata(), np.asarray(fourbar.motion.u[:, 0]))
+    np.testing.assert_allclose(lines[1].get_ydata(), np.asarray(fourbar.motion.q[:, 1]) * 180 / math.pi, rtol=1e-15)
+    np.testing.assert_allclose(lines[1].get_xdata(), np.asarray(fourbar.motion.u[:, 0]) * 180 / math.pi, rtol=1e-15)
+    assert lines[1].get_xdata()[-1] == pytest.approx(360.0, rel=1e-15)  # one crank turn
 
     fig = plot.plot_coordinates(slider)  # an angle and a length: two scales
-    assert [ax.get_ylabel() for ax in fig.axes] == ["position [rad]", "position [m]"]
+    assert [ax.get_ylabel() for ax in fig.axes] == ["position [deg]", "position [m]"]
     assert [len(ax.get_lines()) for ax in fig.axes] == [1, 1]
 
 
 def test_velocities_accelerations_units_and_time_axis(slider):
     fig = plot.plot_velocities(slider, against="time")
-    assert [ax.get_ylabel() for ax in fig.axes] == ["velocity [rad/s]", "velocity [m/s]"]
+    assert [ax.get_ylabel() for ax in fig.axes] == ["velocity [deg/s]", "velocity [m/s]"]
+    np.testing.assert_allclose(fig.axes[0].get_lines()[0].get_ydata(), np.degrees(np.asarray(slider.motion.q_dot[:, 0])), rtol=1e-15)
     assert fig.axes[-1].get_xlabel() == "t [s]"
     assert fig.axes[1].get_lines()[0].get_label() == "x_dot"
     np.testing.assert_array_equal(fig.axes[1].get_lines()[0].get_ydata(), np.asarray(slider.motion.q_dot[:, 1]))
@@ -71,9 +73,9 @@ def test_velocities_accelerations_units_and_time_axis(slider):
 def test_outputs(fourbar, slider):
     fig = plot.plot_outputs(fourbar)
     (ax,) = fig.axes
-    assert ax.get_ylabel() == "transmission_angle [rad]"
-    assert ax.get_xlabel() == "theta2 [rad]"
-    np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), np.asarray(fourbar.outputs["transmission_angle"][0]))
+    assert ax.get_ylabel() == "transmission_angle [deg]"
+    assert ax.get_xlabel() == "theta2 [deg]"
+    np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), np.degrees(np.asarray(fourbar.outputs["transmission_angle"][0])), rtol=1e-15)
     with pytest.raises(ValueError, match="no outputs"):
         plot.plot_outputs(slider)
 
@@ -146,11 +148,14 @@ def test_singular_status_and_blowup_are_toggles(fourbar):
 def test_plot_transmission_marks_toggles(fourbar, slider):
     fig = plot.plot_transmission(fourbar)
     assert [ax.get_ylabel() for ax in fig.axes] == ["transmission angle [deg]", "mechanical advantage [-]"]
-    assert fig.axes[-1].get_xlabel() == "theta2 [rad]"
+    assert fig.axes[-1].get_xlabel() == "theta2 [deg]"
+    toggles = plot.find_toggles(fourbar)
     for ax in fig.axes:
         marks = _by_gid(ax, "toggle")
         assert len(marks) == 2
         assert marks[0].get_label() == "toggle: limit"
+        # marked at the toggles' crank angles, in degrees like the axis
+        np.testing.assert_allclose([m.get_xdata()[0] for m in marks], [math.degrees(t.u) for t in toggles], rtol=1e-12)
     mu_deg = fig.axes[0].get_lines()[0].get_ydata()
     np.testing.assert_allclose(mu_deg, np.degrees(plot.transmission_angle(fourbar)))
 
@@ -183,7 +188,7 @@ def test_draw_fourbar_links_at_pose(fourbar):
     # The traced coupler midpoint covers the whole stroke.
     assert len(_by_gid(ax, "trace")[0].get_xdata()) == N
     assert {t.get_text() for t in ax.texts} == {"O2", "O4", "A", "B", "P"}
-    assert ax.get_title() == f"theta2 = {th2:.4g} rad"
+    assert ax.get_title() == f"theta2 = {math.degrees(th2):.4g} deg"
 
 
 def test_draw_slider_crank_slot_and_dead_centres(slider):
@@ -240,7 +245,7 @@ def test_plot_poses_start_middle_end(fourbar):
     assert len(fig.axes) == 3
     assert [len(_by_gid(ax, "link")) for ax in fig.axes] == [3, 3, 3]
     u = np.asarray(fourbar.motion.u[:, 0])
-    assert [ax.get_title() for ax in fig.axes] == [f"theta2 = {u[i]:.4g} rad" for i in (0, N // 2, N - 1)]
+    assert [ax.get_title() for ax in fig.axes] == [f"theta2 = {math.degrees(u[i]):.4g} deg" for i in (0, N // 2, N - 1)]
 
 
 # ----------------------------------------------------------------------- animation and files

@@ -18,6 +18,7 @@ _REGISTRY = {
     "flap_msd": ("flap_msd", "SCENE"),
     "landing_gear": ("landing_gear", "SCENE"),
     "arc_track_flap": ("arc_track_flap", "SCENE"),
+    "arc_track_flap_landing": ("arc_track_flap", "LANDING_SCENE"),
     "sma_flap": ("sma_flap", "SCENE"),
 }
 

@@ -48,8 +48,8 @@ F's slot start, ``beta2`` angle F-A0-G, ``beta3`` arc angle = flap rotation, ``x
 nut at 35 mm/s from ``s34_i`` to ``s34_f = s34_i + 2 a2 sin(beta3/2)``.
 
 **API.**  ``SCENE`` (cruise), ``LANDING_SCENE`` / ``scene_for(scenario)``, ``params(scenario,
-**overrides)``; from the command line ``jaxmech run arc_track_flap --set M12_i=220 --set
-M12_f=650`` is the landing case.  ``design(**inputs)`` (Chapter 4: inputs -> parameters),
+**overrides)``; from the command line ``jaxmech run arc_track_flap`` (cruise) and
+``jaxmech run arc_track_flap_landing`` (landing, its own title and files).  ``design(**inputs)`` (Chapter 4: inputs -> parameters),
 ``geometry(p)``, ``validate(p, s34=None)`` (Section 5.3's red cells), ``forces(p, s34)``,
 ``quasi_static(q, u, p)``, ``screw_torques(L, p)``, ``air_moment(s34, p)``,
 ``accelerations(p)``, ``fairing_depth(p)``, ``table2(p)``, ``table3(p)``; ``MECHANISM``,
@@ -79,6 +79,7 @@ __all__ = [
     "SCENE",
     "LANDING_SCENE",
     "SCENARIOS",
+    "PARAMETERS",
     "THESIS_INPUTS",
     "MECHANISM",
     "scene_for",
@@ -120,6 +121,30 @@ THESIS_INPUTS = dict(
 _PARAMS = ("a1", "a2", "a3", "alpha0", "b1", "c1", "beta1", "beta2", "beta3", "x_D", "y_D",
            "m_flap", "g", "r", "l", "f", "n_jacks", "weight_share", "M12_i", "M12_f")
 _LENGTH_PARAMS = ("a1", "a2", "a3", "b1", "c1", "x_D", "y_D", "r", "l")
+
+#: What each parameter is: (SI unit, meaning); the thesis's names (Table 2).
+PARAMETERS = {
+    "a1": ("m", "|A0 B0|: flap rotation centre to the screw pivot"),
+    "a2": ("m", "|A0 A|: rotation centre to the nut pin A on the flap"),
+    "a3": ("m", "screw length B0-B (must exceed the stroke end s34_f)"),
+    "alpha0": ("rad", "angle x-A0-B0 of the screw pivot"),
+    "b1": ("m", "radius of the outer slot (pin F); b1 > c1"),
+    "c1": ("m", "radius of the inner slot (pin G)"),
+    "beta1": ("rad", "angle of F's slot start (flap closed)"),
+    "beta2": ("rad", "angle F-A0-G between the pins"),
+    "beta3": ("rad", "arc angle of both slots = flap rotation"),
+    "x_D": ("m", "flap centre of mass D, x (flap closed)"),
+    "y_D": ("m", "flap centre of mass D, y (flap closed)"),
+    "m_flap": ("kg", "flap mass"),
+    "g": ("m/s^2", "gravity"),
+    "r": ("m", "screw mean radius"),
+    "l": ("m", "screw lead"),
+    "f": ("-", "screw thread friction coefficient"),
+    "n_jacks": ("-", "screw jacks per flap (the air moment is shared)"),
+    "weight_share": ("-", "share of the flap weight each jack carries (1: the thesis's reading)"),
+    "M12_i": ("N m", "whole-flap air moment, flap closed (closing positive)"),
+    "M12_f": ("N m", "whole-flap air moment, flap deployed (linear in s34 between)"),
+}
 
 
 # --------------------------------------------------------------------------- design (Ch. 4)
@@ -533,7 +558,7 @@ def table3(p: Mapping | None = None) -> dict:
 
 # --------------------------------------------------------------------------- scenes
 def _drawing(p):
-    """Drawing spec (``jaxmech.plot``): screw B0-B with the nut's line, the flap plate
+    """Drawing spec (``jaxmech.drawing``): screw B0-B with the nut's line, the flap plate
     A-F-G-D, both arc slots about A0 (the arcs their pins sweep), the chord A_i A_f of the
     design method (fixed points), traced A and D, transmission angle at A (A0-A-B0)."""
     pn = {k: np.asarray(p[k], float) for k in _PARAMS}
@@ -557,6 +582,12 @@ def _stroke(p):
     return s34_i, s34_f
 
 
+def _moments(scenario):
+    """``"750 N m"`` (held) or ``"220 -> 650 N m"`` (closed -> deployed)."""
+    m_i, m_f = SCENARIOS[scenario]["M12_i"], SCENARIOS[scenario]["M12_f"]
+    return f"{m_i:g} N m" if m_i == m_f else f"{m_i:g} -> {m_f:g} N m (closed -> deployed)"
+
+
 @functools.cache
 def scene_for(scenario: str = "cruise") -> Scene:
     """The scene with the air moments of a flight scenario ("cruise" or "landing")."""
@@ -565,8 +596,7 @@ def scene_for(scenario: str = "cruise") -> Scene:
     defaults = design(**THESIS_INPUTS, a3=0.250, **SCENARIOS[scenario])
     return Scene(
         name="arc_track_flap" if scenario == "cruise" else f"arc_track_flap_{scenario}",
-        summary=(f"circular-arc-track flap, screw jack at 35 mm/s, {scenario} air moment "
-                 f"{SCENARIOS[scenario]['M12_i']:g}-{SCENARIOS[scenario]['M12_f']:g} N m (Arslan 2022)"),
+        summary=f"circular-arc-track flap, screw jack at 35 mm/s, {scenario} air moment {_moments(scenario)} (Arslan 2022)",
         mechanism=MECHANISM,
         defaults=defaults,
         guess=_guess,
@@ -576,6 +606,7 @@ def scene_for(scenario: str = "cruise") -> Scene:
         outputs=_outputs,
         validate=validate,
         drawing=_drawing,
+        parameters=PARAMETERS,
         document="G. Arslan, 'Development of kinetostatic design methodology for airplane flap mechanisms', MSc thesis, İzmir Institute of Technology, December 2022; corrections in docs/seeds/arc_track_flap.md",
     )
 

@@ -4,6 +4,7 @@ one is run over its stroke (the engine behind ``jaxmech run``)."""
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Callable, Mapping
 
 import jax.numpy as jnp
@@ -12,6 +13,7 @@ import numpy as np
 from ..kinematics import ConstantSpeed, Motion, motion
 from ..mechanism import Mechanism
 from ..status import Status, status_counts
+from ..units import for_reading
 
 __all__ = ["Scene", "SceneResult", "run_scene"]
 
@@ -33,8 +35,11 @@ class Scene:
     - `validate`: optional ``p -> None`` raising ``ValueError`` that says what to change.
     - `plots`: optional ``(result, outdir) -> list of PNG paths``.
     - `drawing`: optional ``p -> dict`` describing how to draw the mechanism from its named
-      points (see ``jaxmech.plot``): links, ground pivots, slots, chords, traced points.
+      points (see ``jaxmech.drawing``): links, ground pivots, slots, chords, traced points.
     - `document`: the seed document and where its corrections are written down.
+    - `parameters`: ``{name: (SI unit, meaning)}`` for every name in `defaults` (what
+      ``jaxmech scenes SCENE`` lists, and the unit ``--set`` checks); empty for a scene
+      that does not describe itself.
     """
 
     name: str
@@ -50,14 +55,55 @@ class Scene:
     plots: Callable | None = None
     drawing: Callable | None = None
     document: str = ""
+    parameters: Mapping[str, tuple[str, str]] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.parameters:
+            missing = [k for k in self.defaults if k not in self.parameters]
+            extra = [k for k in self.parameters if k not in self.defaults]
+            if missing or extra:
+                raise ValueError(
+                    f"scene {self.name!r}: parameters must describe exactly the defaults; "
+                    f"undescribed {missing}, not a default {extra}"
+                )
+
+    def check_name(self, name: str) -> None:
+        """``ValueError`` (one line, naming the closest valid name) unless ``name`` is a
+        parameter of this scene."""
+        if name in self.defaults:
+            return
+        close = difflib.get_close_matches(name, list(self.defaults), n=1, cutoff=0.5)
+        hint = f"did you mean {close[0]!r}?" if close else f"its parameters are: {', '.join(self.defaults)}"
+        raise ValueError(f"scene {self.name!r} has no parameter {name!r}; {hint}")
+
+    def unit(self, name: str) -> str:
+        """The SI unit of parameter ``name`` (``""`` when the scene does not say)."""
+        self.check_name(name)
+        return self.parameters.get(name, ("", ""))[0]
+
+    def describe(self) -> str:
+        """Text table of the parameters: name, SI unit, default (angles also in degrees)
+        and meaning, one line each, under the scene's name and summary."""
+        rows = []
+        for k, v in self.defaults.items():
+            unit, meaning = self.parameters.get(k, ("?", "(not described)"))
+            shown = f"{float(v):.6g}"
+            deg, dunit = for_reading(float(v), unit)
+            if dunit != unit:
+                shown += f" ({deg:.6g} {dunit})"
+            rows.append((k, unit, shown, meaning))
+        w = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(("name", "unit", "default"))]
+        lines = [f"{self.name}: {self.summary}", ""]
+        if self.document:
+            lines += [f"document: {self.document}", ""]
+        lines.append(f"{'name':<{w[0]}}  {'unit':<{w[1]}}  {'default':<{w[2]}}  meaning")
+        lines += [f"{n:<{w[0]}}  {u:<{w[1]}}  {d:<{w[2]}}  {m}" for n, u, d, m in rows]
+        return "\n".join(lines)
 
     def params(self, **overrides) -> dict:
         """Default parameters with overrides, checked (unknown name, bad value: ValueError)."""
-        unknown = [k for k in overrides if k not in self.defaults]
-        if unknown:
-            raise ValueError(
-                f"scene {self.name!r} has no parameter(s) {unknown}; its parameters are: {', '.join(self.defaults)}"
-            )
+        for k in overrides:
+            self.check_name(k)
         p = {**self.defaults, **{k: float(v) for k, v in overrides.items()}}
         self.mechanism.check_params(p)
         if self.validate is not None:
@@ -98,12 +144,22 @@ class SceneResult:
         return cols
 
     def summary(self) -> str:
-        """Short text table: min and max of every column, and the status counts."""
-        lines = [f"scene {self.scene.name}: {self.scene.summary}", f"{'column':<28}{'min':>16}{'max':>16}"]
+        """Short text table: min and max of every column (angles in degrees; the CSV of
+        ``table()`` stays SI), the parameters changed from the scene's defaults, and the
+        status counts."""
+        sc = self.scene
+        lines = [f"scene {sc.name}: {sc.summary}"]
+        changed = [k for k, v in self.params.items() if float(v) != float(sc.defaults[k])]
+        if changed:
+            shown = (for_reading(float(self.params[k]), sc.parameters.get(k, ("", ""))[0]) for k in changed)
+            lines.append("changed from the defaults: " + ", ".join(f"{k} = {v:.6g} {u}".rstrip() for k, (v, u) in zip(changed, shown)))
+        lines.append(f"{'column':<28}{'min':>16}{'max':>16}")
         for k, v in self.table().items():
             if k == "status[-]":
                 continue
-            v = np.asarray(v, float)
+            name, _, unit = k[:-1].partition("[")
+            v, unit = for_reading(np.asarray(v, float), unit)
+            k = f"{name}[{unit}]"
             lo, hi = (np.nanmin(v), np.nanmax(v)) if np.any(np.isfinite(v)) else (np.nan, np.nan)
             lines.append(f"{k:<28}{lo:>16.6g}{hi:>16.6g}")
         lines.append(f"status: {status_counts(self.motion.status)}")

@@ -8,7 +8,7 @@ import numpy as np
 from ..mechanism import Mechanism, cis
 from .base import Scene
 
-__all__ = ["FOURBAR", "SLIDER_CRANK", "fourbar_mechanism", "slider_crank_mechanism"]
+__all__ = ["FOURBAR", "SLIDER_CRANK", "FOURBAR_PARAMETERS", "SLIDER_CRANK_PARAMETERS", "fourbar_mechanism", "slider_crank_mechanism"]
 
 #: Four-bar: crank a at O2 (angle theta2), coupler b (theta3), rocker c at O4 (theta4),
 #: ground d along +x.  Loop: a e^{i theta2} + b e^{i theta3} - c e^{i theta4} - d = 0.
@@ -83,6 +83,21 @@ def _transmission(p, mo):
     return {"transmission_angle": (mu, "rad")}
 
 
+#: Parameters of the four-bar scene: (SI unit, meaning).
+FOURBAR_PARAMETERS = {
+    "a": ("m", "crank O2-A (input link)"),
+    "b": ("m", "coupler A-B"),
+    "c": ("m", "rocker O4-B (output link)"),
+    "d": ("m", "ground O2-O4"),
+}
+
+#: Parameters of the slider-crank scene: (SI unit, meaning).
+SLIDER_CRANK_PARAMETERS = {
+    "a": ("m", "crank O2-A"),
+    "b": ("m", "connecting rod A-B"),
+    "e": ("m", "offset of the slider line above O2"),
+}
+
 FOURBAR = Scene(
     name="fourbar",
     summary="classic crank-rocker four-bar (a=1, b=3, c=2.5, d=3.5 m), one crank turn at 1 rad/s",
@@ -94,6 +109,7 @@ FOURBAR = Scene(
     units={"theta2": "rad", "theta3": "rad", "theta4": "rad"},
     outputs=_transmission,
     drawing=_fourbar_drawing,
+    parameters=FOURBAR_PARAMETERS,
 )
 
 SLIDER_CRANK = Scene(
@@ -106,4 +122,5 @@ SLIDER_CRANK = Scene(
     speed=1.0,
     units={"theta2": "rad", "theta3": "rad", "x": "m"},
     drawing=_slider_crank_drawing,
+    parameters=SLIDER_CRANK_PARAMETERS,
 )

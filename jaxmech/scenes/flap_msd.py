@@ -76,6 +76,7 @@ __all__ = [
     "SCENE",
     "mechanism",
     "DEFAULTS",
+    "PARAMETERS",
     "closed_form_positions",
     "MODEL",
     "MOTOR",
@@ -110,6 +111,39 @@ DEFAULTS = {
     "Cl_delta": 1.4, "Cl_theta": 1.3, "Cm_delta": -0.3, "Cm_theta": -0.3,
     # DC motor: armature resistance (ohm), torque constant (N m/A)
     "R_a": 2.0, "K_m": 20.0,
+}
+
+#: What each parameter is: (SI unit, meaning); report §4's names.
+PARAMETERS = {
+    "a": ("m", "crank O-A (3.5/K)"),
+    "b": ("m", "coupler A-G (9/K)"),
+    "c": ("m", "main flap arm C-G, normal to the chord (5/K)"),
+    "l": ("m", "main flap hinge C from the crank pivot O, x offset: C - O = l - i r"),
+    "r": ("m", "main flap hinge C below the crank pivot O: C - O = l - i r"),
+    "d": ("m", "bar B-D (9/K)"),
+    "p": ("m", "D-G part of the straight bar D-G-E (2.25/K)"),
+    "s": ("m", "main flap hinge C from the pivot B, x offset: C - B = s - i t"),
+    "t": ("m", "main flap hinge C below the pivot B: C - B = s - i t"),
+    "g": ("m", "G-E part of the bar D-G-E (printed q; 3/K)"),
+    "h": ("m", "link E-H (17.75/K)"),
+    "z": ("m", "second flap arm F-H, normal to its chord (4/K)"),
+    "c1": ("m", "main flap chord C-F"),
+    "c2": ("m", "second flap chord F-L"),
+    "M": ("kg", "main flap mass (at the chord midpoint G1)"),
+    "m": ("kg", "second flap mass (at the chord midpoint G2)"),
+    "J_M": ("kg m^2", "main flap inertia about G1 (as printed: M c1 3.5/K)"),
+    "J_m": ("kg m^2", "second flap inertia about G2 (as printed: m c2 2.5/K)"),
+    "G": ("m/s^2", "gravity"),
+    "rho": ("kg/m^3", "air density"),
+    "U": ("m/s", "airspeed (240 km/h)"),
+    "S1": ("m^2", "main flap area"),
+    "S2": ("m^2", "second flap area"),
+    "Cl_delta": ("1/rad", "main flap lift slope"),
+    "Cl_theta": ("1/rad", "second flap lift slope"),
+    "Cm_delta": ("-", "main flap moment coefficient"),
+    "Cm_theta": ("-", "second flap moment coefficient"),
+    "R_a": ("ohm", "DC motor armature resistance"),
+    "K_m": ("N m/A", "DC motor torque constant"),
 }
 
 _LENGTHS = ("a", "b", "c", "l", "r", "d", "p", "s", "t", "g", "h", "z", "c1", "c2")
@@ -483,6 +517,7 @@ SCENE = Scene(
     summary="MSD double flap (PoliMi report): crank 275-320 deg at 1 rad/s, second flap turns 60.6 deg",
     mechanism=mechanism,
     defaults=DEFAULTS,
+    parameters=PARAMETERS,
     guess=lambda p: closed_form_positions(p, ALPHA_START),
     stroke=lambda p: (ALPHA_START, ALPHA_END),
     speed=1.0,

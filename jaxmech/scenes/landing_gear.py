@@ -75,6 +75,7 @@ __all__ = [
     "design",
     "design_family",
     "DEFAULTS",
+    "PARAMETERS",
     "gear_angle",
     "constant_speed_motion",
     "linear_angle_motion",
@@ -219,6 +220,16 @@ def _default_params() -> dict:
 
 #: Default parameters (m, rad): ``d``, ``h`` from the right-angle design closed form.
 DEFAULTS = _default_params()
+
+#: What each parameter is: (SI unit, meaning).
+PARAMETERS = {
+    "d": ("m", "gear pivot B to the rod end P (report §3.1 design)"),
+    "h": ("m", "gear pivot B to the cylinder pivot C (report §3.1 design)"),
+    "x1": ("m", "cylinder pin-to-pin length, gear down (stroke start; 1.25 ft)"),
+    "x2": ("m", "cylinder pin-to-pin length, gear up (stroke end; 2 ft)"),
+    "AB": ("m", "gear leg, pivot B to the wheel end A (2.5 ft)"),
+    "beta": ("rad", "angle of the leg BA clockwise from B-P (the report gives none: 0)"),
+}
 
 
 def _guess(p: Mapping, x):
@@ -379,6 +390,7 @@ SCENE = Scene(
     summary="hydraulic nose gear (Creppe 2021): cylinder 1.25 -> 2 ft at 0.25 ft/s, gear turns 90 deg in 3 s",
     mechanism=mechanism,
     defaults=DEFAULTS,
+    parameters=PARAMETERS,
     guess=lambda p: _guess(p, p["x1"]),
     stroke=lambda p: (p["x1"], p["x2"]),
     speed=SPEED,

@@ -77,6 +77,7 @@ from .base import Scene
 __all__ = [
     "SCENE",
     "params",
+    "parameters",
     "flap_mechanism",
     "residual",
     "drive_params",
@@ -129,6 +130,36 @@ def params(n_hinges: int = 2, **overrides) -> dict:
         raise ValueError(f"sma_flap: unknown parameter(s) {unknown}; parameters are {list(p)}")
     p.update({k: float(v) for k, v in overrides.items()})
     return p
+
+
+def parameters(n_hinges: int = 2) -> dict:
+    """What each parameter of ``params(n_hinges)`` is: ``{name: (SI unit, meaning)}``."""
+    _check_n(n_hinges)
+    out = {}
+
+    def xy(prefix, what):
+        out[f"{prefix}_x"] = ("m", f"{what}, x (chordwise, from the leading edge)")
+        out[f"{prefix}_y"] = ("m", f"{what}, y")
+
+    for j in range(1, n_hinges + 1):
+        xy(f"J{j}", f"hinge {j}")
+        xy(f"w{j}F", f"SMA wire {j}, end on the body ahead of hinge {j}")
+        xy(f"w{j}A", f"SMA wire {j}, end on the body behind hinge {j}")
+        xy(f"s{j}F", f"bias spring {j}, end on the body ahead")
+        xy(f"s{j}A", f"bias spring {j}, end on the body behind")
+        out[f"k{j}"] = ("N/m", f"bias spring {j} stiffness")
+        out[f"F_pre{j}"] = ("N", f"bias spring {j} preload")
+    for b in range(1, n_hinges + 1):
+        out[f"m{b}"] = ("kg", f"mass of segment {b}")
+        xy(f"cg{b}", f"centre of mass of segment {b}")
+    xy("TE", "trailing edge")
+    out.update(A_w=("m^2", "SMA wire cross-section"), E_M=("Pa", "martensite Young's modulus"),
+               E_A=("Pa", "austenite Young's modulus"), xi=("-", "martensite fraction (1: E = E_M)"),
+               g=("m/s^2", "gravity"))
+    for j in range(1, n_hinges + 1):
+        out[f"F{j}"] = ("N", f"prescribed tension of wire {j} (used when force_driven = 1)")
+    out["force_driven"] = ("-", "1: wire tensions F_j drive; 0: the SMA strain drives (the scene)")
+    return {k: out[k] for k in params(n_hinges)}
 
 
 def _check_n(n):
@@ -547,6 +578,7 @@ def _scene(n, name, summary):
         summary=summary,
         mechanism=flap_mechanism(n),
         defaults=params(n),
+        parameters=parameters(n),
         guess=lambda p: jnp.zeros(n),
         stroke=lambda p: EPS_RANGE,
         speed=0.01,

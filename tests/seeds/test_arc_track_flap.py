@@ -55,6 +55,24 @@ def test_defaults_are_the_thesis_case_study(p):
     assert get_scene("arc_track_flap") is atf.SCENE
 
 
+def test_landing_case_is_a_scene_of_its_own(runs, tmp_path):
+    """``jaxmech run arc_track_flap_landing``: its own registry name, title (the summary
+    header) and file names, and its air moment from 220 N m (closed) to 650 N m (deployed),
+    halved per jack (Section 5.2)."""
+    from jaxmech.cli import write_csv
+
+    scene = get_scene("arc_track_flap_landing")
+    assert scene is atf.LANDING_SCENE and scene.name == "arc_track_flap_landing"
+    res = runs["landing"]
+    m12 = np.asarray(res.outputs["M12"][0])
+    _close(m12[[0, -1]], [110.0, 325.0], rel=1e-12)
+    head = res.summary().splitlines()[0]
+    assert head.startswith("scene arc_track_flap_landing: ") and "landing air moment 220 -> 650 N m" in head
+    assert "750" not in head and "cruise air moment 750 N m" in runs["cruise"].summary().splitlines()[0]
+    write_csv(res.table(), tmp_path / f"{scene.name}.csv")  # the name `jaxmech run` gives its CSV
+    assert (tmp_path / "arc_track_flap_landing.csv").read_text().splitlines()[0].split(",")[0] == "t[s]"
+
+
 # --------------------------------------------------------------------------- Table 2
 def test_table2_every_computed_entry(p):
     """Table 2: a3 = 250, s34_i = 80.3, delta_s = 144.3, g2 = 122.7, p2 = 197.1,
