@@ -8,14 +8,12 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
-import optax  # noqa: E402
 import pytest  # noqa: E402
 
 from jaxmech import problems  # noqa: E402
 from jaxmech.scenes import run_scene  # noqa: E402
 
 DEG = np.pi / 180
-TRAVEL_TOL = 1e-6  # rad: the equalities are met by elimination, to Newton's precision
 REL_CLOSED = 1e-9  # the brief's agreement with the gear's closed form
 
 
@@ -24,22 +22,25 @@ def test_flap_msd_sixty_degrees_at_lower_peak_torque():
     from jaxmech.scenes.flap_msd import DEFAULTS, SCENE
 
     points = 31
-    # Adam compiles the objective twice, L-BFGS's line search four times: the test checks
-    # the problem's guarantees, not the optimum (benchmarks/design.py runs L-BFGS).
-    res = problems.flap_msd(points=points, starts=2, steps=10, optimizer=optax.adam(2e-3))
-    assert abs(res.theta_travel - 60 * DEG) < TRAVEL_TOL
+    # Two starts and a short budget: the test checks the problem's guarantees (every
+    # constraint met, recomputed by run_scene), not the optimum (benchmarks/design.py).
+    res = problems.flap_msd(points=points, starts=2, maxiter=15)
+    assert res.violation <= 1e-8
     assert res.document_theta_travel == pytest.approx(60.5816 * DEG, abs=1e-6)
-    assert "peak torque" in res.report and "lower" in res.report
+    assert "peak torque" in res.report and "won" in res.report
 
-    # Independent recompute with run_scene (the eager path: kinematics.motion + the
-    # scene's own outputs); it raises if the design cannot be assembled over the stroke.
-    run = run_scene(SCENE, points, **{k: res.params[k] for k in problems.FLAP_FREE + problems.FLAP_ELIMINATED})
+    # Independent recompute with run_scene (the eager path: continuation over the stroke,
+    # the virtual-power torque); it raises if the design cannot be assembled.
+    run = run_scene(SCENE, points, **{k: res.params[k] for k in problems.FLAP_VARS})
     table = run.table()
     assert np.all(table["status[-]"] == 0)
     th = table["theta[rad]"]
-    assert abs((th[-1] - th[0]) - 60 * DEG) < TRAVEL_TOL
+    assert abs((th[-1] - th[0]) - 60 * DEG) < 1e-8
     assert th[0] == pytest.approx(0.024093 * DEG, abs=1e-8)  # same retracted start
     assert np.max(table["torque[N m]"]) == pytest.approx(res.peak_torque, rel=1e-9)
+    mu2 = np.arcsin(-np.sin(table["phi[rad]"] - table["psi[rad]"]))
+    mu3 = np.arcsin(np.cos(table["theta[rad]"] + table["xi[rad]"]))
+    assert min(mu2.min(), mu3.min()) >= problems.FLAP_MIN_TRANSMISSION - 1e-8
     doc = run_scene(SCENE, points).table()["torque[N m]"]
     assert np.max(doc) == pytest.approx(res.document_peak_torque, rel=1e-9)
     assert res.peak_torque < res.document_peak_torque
