@@ -16,7 +16,7 @@
    implicit gradients) against ``scipy.optimize.minimize(method="Nelder-Mead")`` from the
    same starts on the same objective: time and evaluations to the same objective value.
    ``DESIGN_PROBLEMS`` registers the four-bar parameter identification and the flap_msd
-   design problem of ``jaxmech.problems`` (``flap_msd_problem``).
+   design problem of ``examples/design_problems.py`` (``flap_msd_problem``).
 
 Run: ``python -m benchmarks.design [--quick] [--full] [--problems]``; writes
 ``results/design.json``.  The default run takes a few minutes on 2 idle cores.
@@ -188,7 +188,7 @@ def fourbar_identification_problem():
 
 
 def flap_msd_problem():
-    """The flap_msd design problem (issue 5, ``jaxmech.problems.flap_msd``): least smooth
+    """The flap_msd design problem (issue 5, ``examples.design_problems.flap_msd``): least smooth
     peak motor torque (``peak(mode="smooth")``, T = 1 N m) over the free lengths
     (d, p, s, t, g) of loops 2-3, with h and z eliminated so that the second flap starts
     where the document's does and turns through exactly 60 deg.  Four starts: the
@@ -197,7 +197,7 @@ def flap_msd_problem():
 
     if "flap_msd" not in scene_names():
         return None
-    from jaxmech.problems import flap_bounds, flap_msd_objective, flap_starts
+    from examples.design_problems import flap_bounds, flap_msd_objective, flap_starts
 
     return {
         "name": "flap_msd_60deg_min_peak_torque",
@@ -281,7 +281,7 @@ def bench_flap_problem(points=POINTS, starts=4):
     from scipy.optimize import minimize as scipy_minimize
 
     from jaxmech.constrained import minimize, program
-    from jaxmech.problems import (FLAP_ELIMINATED, FLAP_FREE, FLAP_VARS, flap_bounds, flap_eliminated, flap_msd_objective,
+    from examples.design_problems import (FLAP_ELIMINATED, FLAP_FREE, FLAP_VARS, flap_bounds, flap_eliminated, flap_msd_objective,
                                   flap_starts, flap_state, flap_state_bounds)
     from jaxmech.scenes.flap_msd import DEFAULTS
 

@@ -1,4 +1,4 @@
-"""Worked design problems (jaxmech.problems), each checked against truths the solver does
+"""Worked design problems (examples/design_problems.py), each checked against truths the solver does
 not use: run_scene (the eager engine path) for the flap, the closed form for the gear, the
 thesis's own checks and the closed-form depth for the arc-track flap, and the known
 parameters behind synthetic records for the identification."""
@@ -10,7 +10,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxmech import problems  # noqa: E402
+from examples import design_problems as problems  # noqa: E402
 from jaxmech.scenes import run_scene  # noqa: E402
 
 DEG = np.pi / 180
@@ -68,7 +68,7 @@ def test_landing_gear_recovers_closed_form():
 
 # ----------------------------------------------------------------------- 3. arc_track_flap
 def test_arc_track_flap_shallower_fairing_within_checks_and_cap():
-    from jaxmech.scenes.arc_track_flap import forces, validate
+    from jaxmech.scenes.arc_track_flap import SCENE, forces, validate
 
     res = problems.arc_track_flap()
     p = res.params
@@ -76,7 +76,7 @@ def test_arc_track_flap_shallower_fairing_within_checks_and_cap():
     f = forces(p)  # engine solve over the stroke; validate(p, s34): pins within their slots
     assert np.all(f["status"] == 0)
     assert np.max(f["T_R"]) <= res.cap
-    assert res.cap == pytest.approx(problems.ARC_TORQUE_CAP * np.max(forces(dict(problems._arc_scene().defaults))["T_R"]), rel=1e-9)
+    assert res.cap == pytest.approx(problems.ARC_TORQUE_CAP * np.max(forces(dict(SCENE.defaults))["T_R"]), rel=1e-9)
     assert res.s34_f <= p["a3"]
     # Depth: the least distance from A0 to the screw line is h = a2 cos(beta3/2).
     h = p["a2"] * np.cos(p["beta3"] / 2)

@@ -32,10 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .design import FitResult, fit, peak, scene_figure
-from .dynamics import Body, Gravity, Model, Moment, generalized_forces
-from .scenes.base import Scene
-from .sweep import design_columns
+from jaxmech.design import FitResult, fit, peak, scene_figure
+from jaxmech.dynamics import Body, Gravity, Model, Moment, generalized_forces
+from jaxmech.scenes.base import Scene
+from jaxmech.sweep import design_columns
 
 __all__ = [
     "FlapDesign",
@@ -72,21 +72,21 @@ def _flap_torque(p, mo):
     # corrections), equal to the scene's virtual-power torque (tests/seeds/test_flap_msd.py;
     # tests/test_problems.py checks the answer with run_scene) and cheaper to compile:
     # no reverse pass inside the objective's own gradient.
-    from .scenes.flap_msd import torque_document
+    from jaxmech.scenes.flap_msd import torque_document
 
     return {"torque": (torque_document(p, mo, corrected=True), "N m")}
 
 
 @functools.cache
 def _flap_scene() -> Scene:
-    from .scenes.flap_msd import SCENE
+    from jaxmech.scenes.flap_msd import SCENE
 
     return _lean(SCENE, _flap_torque)
 
 
 @functools.cache
 def _arc_scene() -> Scene:
-    from .scenes.arc_track_flap import SCENE, quasi_static
+    from jaxmech.scenes.arc_track_flap import SCENE, quasi_static
 
     return _lean(SCENE, lambda p, mo: {"T_R": (quasi_static(mo.q, mo.u, p)["T_R"], "N m")})
 
@@ -104,7 +104,7 @@ FLAP_TEMPERATURE = 1.0  #: N m, temperature of the smooth peak (bound T log N)
 
 def _flap_theta_ends(p):
     """theta at alpha = 275 and 320 deg (rad), closed form (circle intersections)."""
-    from .scenes.flap_msd import ALPHA_END, ALPHA_START, closed_form_positions
+    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, closed_form_positions
 
     return closed_form_positions(p, ALPHA_START)[5], closed_form_positions(p, ALPHA_END)[5]
 
@@ -112,7 +112,7 @@ def _flap_theta_ends(p):
 @functools.cache
 def _flap_doc_theta_start() -> float:
     """The document's theta at alpha = 275 deg (rad): 0.024093 deg."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     with jax.ensure_compile_time_eval():  # a constant, also when first needed under a trace
         return float(_flap_theta_ends({k: jnp.asarray(v, jnp.float64) for k, v in DEFAULTS.items()})[0])
@@ -126,7 +126,7 @@ def _flap_project(free):
     parameters traced and the Jacobian held: at a root its derivative is
     ``-F_{hz}^{-1} F_free``, the implicit function theorem's, and its value is unchanged.
     """
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     base = _jnp(DEFAULTS)
     theta0 = _flap_doc_theta_start()
@@ -192,7 +192,7 @@ def flap_eliminated(free) -> dict[str, np.ndarray]:
 def flap_starts(n: int = 4, *, seed: int = 0) -> dict[str, np.ndarray]:
     """``n`` starting designs for ``flap_msd``: the document's, then random ones within
     +-10 % of it (``numpy.random.default_rng(seed)``)."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     rng = np.random.default_rng(seed)
     scale = np.concatenate([[1.0], 1.0 + 0.1 * (2 * rng.random(n - 1) - 1)]) if n > 1 else np.ones(1)
@@ -207,7 +207,7 @@ def flap_starts(n: int = 4, *, seed: int = 0) -> dict[str, np.ndarray]:
 
 def flap_bounds() -> dict[str, tuple[float, float]]:
     """Box of ``flap_msd``'s free parameters: 0.7 to 1.3 times the document's values."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     return {k: (0.7 * DEFAULTS[k], 1.3 * DEFAULTS[k]) for k in FLAP_FREE}
 
@@ -220,7 +220,7 @@ FLAP_MIN_TRANSMISSION = 20.0 * _DEG  #: default least transmission angle of loop
 def flap_state_bounds() -> dict[str, tuple[float, float]]:
     """Box of the constrained ``flap_msd``: ``flap_bounds`` for the free lengths, 0.5-1.5
     times the document's for ``h`` and ``z`` (no longer eliminated)."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     return {**flap_bounds(), **{k: (0.5 * DEFAULTS[k], 1.5 * DEFAULTS[k]) for k in FLAP_ELIMINATED}}
 
@@ -228,10 +228,10 @@ def flap_state_bounds() -> dict[str, tuple[float, float]]:
 def _flap_sample(p, alpha):
     """One stroke sample by the engine's position solve from the closed-form (dyad) guess:
     ``(q, dq/dalpha, d2q/dalpha2, ok)``, differentiable in ``p`` by the implicit rule."""
-    from .kinematics import input_derivatives
-    from .scenes.flap_msd import closed_form_positions, mechanism
-    from .solve import solve_one
-    from .status import Status
+    from jaxmech.kinematics import input_derivatives
+    from jaxmech.scenes.flap_msd import closed_form_positions, mechanism
+    from jaxmech.solve import solve_one
+    from jaxmech.status import Status
 
     guess = closed_form_positions(jax.lax.stop_gradient(p), alpha)
     assembled = jnp.all(jnp.isfinite(guess))  # every dyad closes at this crank angle
@@ -260,8 +260,8 @@ def flap_state(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSIO
     """
     import types
 
-    from .scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS, torque_document
-    from .constrained import Stated
+    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS, torque_document
+    from jaxmech.constrained import Stated
 
     alphas = jnp.linspace(ALPHA_START, ALPHA_END, points)
     theta0 = _flap_doc_theta_start()
@@ -339,8 +339,8 @@ def flap_msd(*, points: int = 101, starts: int | dict = 4, min_transmission: flo
 
     **Returns** a ``FlapDesign``.  **Raises** ``RuntimeError`` if no start is feasible.
     """
-    from .constrained import minimize
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.constrained import minimize
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     if isinstance(starts, int):
         p0 = flap_starts(starts)
@@ -391,8 +391,8 @@ def _flap_measure(points, min_transmission, design):
 
 @functools.cache
 def _flap_program(points, min_transmission):
-    from .constrained import program
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.constrained import program
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     return program(flap_state(points, min_transmission), FLAP_VARS, jnp.asarray([DEFAULTS[k] for k in FLAP_VARS]))
 
@@ -428,7 +428,7 @@ def _gear_misfit(cols, p):
 
 @functools.cache
 def _gear_objective():
-    from .scenes.landing_gear import SCENE
+    from jaxmech.scenes.landing_gear import SCENE
 
     # Only the ends of the stroke matter: two samples.
     return scene_figure(SCENE, _gear_misfit, points=2, name="gear misfit")
@@ -449,7 +449,7 @@ def landing_gear(*, steps: int = 60) -> GearDesign:
 
     **Returns** a ``GearDesign`` (m, rad).
     """
-    from .scenes.landing_gear import FT, design
+    from jaxmech.scenes.landing_gear import FT, design
 
     starts = {"d": FT * np.array([0.5, 1.0, 0.8, 0.7]), "h": FT * np.array([1.6, 1.5, 2.0, 1.4])}
     bounds = {"d": (0.2 * FT, 1.5 * FT), "h": (0.8 * FT, 3.0 * FT)}
@@ -551,7 +551,7 @@ def arc_track_flap(*, points: int = 41, steps: int = 100, cap_factor: float = AR
 
     **Returns** a ``FairingDesign``; check it with ``scenes.arc_track_flap.validate``.
     """
-    from .scenes.arc_track_flap import SCENE
+    from jaxmech.scenes.arc_track_flap import SCENE
 
     p0 = dict(SCENE.defaults)
     measure = jax.jit(functools.partial(_arc_measures, points))
@@ -588,14 +588,14 @@ def _arc_objective(points, cap, depth0):
 
 # =========================================================================== 4. identification
 def _fourbar_loops(q, u, p):
-    from .mechanism import cis
+    from jaxmech.mechanism import cis
 
     return [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d]
 
 
 def _loaded_fourbar():
-    from .mechanism import Mechanism, cis
-    from .scenes.classic import FOURBAR
+    from jaxmech.mechanism import Mechanism, cis
+    from jaxmech.scenes.classic import FOURBAR
 
     mech = Mechanism(
         name="loaded_fourbar",
