@@ -349,21 +349,122 @@ def bench_flap_problem(points=POINTS, starts=4):
     return rows
 
 
+def _pylinkage_fourbar():
+    """A pylinkage four-bar (crank, RRR dyad, coupler point): the linkage its swarm carries."""
+    import pylinkage as pl
+
+    o2, o4 = pl.Ground(0.0, 0.0, name="O2"), pl.Ground(3.5, 0.0, name="O4")
+    a = pl.Crank(o2, 1.0, name="A")
+    b = pl.RRRDyad(a, o4, 3.0, 2.5, name="B")
+    p = pl.FixedDyad(a, b, 1.7, 0.5, name="P")
+    return pl.Linkage([o2, o4, a, b, p], name="fourbar")
+
+
+def bench_path_synthesis(n_targets=10, particles=100, iterations=(100, 300, 1000)):
+    """Four-bar path synthesis on two target curves: gradient least squares (exact
+    implicit Jacobians, trust region, 8 random starts; compile included) against
+    pylinkage's particle swarm (``particle_swarm_optimization``, local-best ring PSO), with
+    the same 9 unknowns, the same prescribed crank angles and the same error measure (rms
+    distance to the targets; the swarm's score evaluates it by numpy circle intersection,
+    faster than pylinkage's own simulation, which favours the swarm)."""
+    from examples import path_synthesis as ps
+    from pylinkage import particle_swarm_optimization
+
+    linkage = _pylinkage_fourbar()
+    rows = {}
+    for kind in ("coupler", "ellipse"):
+        targets, alpha = ps.target_curve(kind, n_targets)
+        size = float(np.max(np.abs(targets - np.mean(targets))))
+        c = np.mean(targets)
+
+        def rms(dims):
+            p = dict(zip(ps.PARAMS, dims))
+            if min(p["a"], p["b"], p["c"], p["d"]) <= 0:
+                return np.inf
+            th2 = alpha - p["phi"]
+            A = p["a"] * np.exp(1j * th2)
+            AO = p["d"] - A
+            cos_ = (p["b"] ** 2 + np.abs(AO) ** 2 - p["c"] ** 2) / (2 * p["b"] * np.abs(AO))
+            if np.any(np.abs(cos_) > 1):
+                return np.inf  # cannot be assembled at some target
+            th3 = np.angle(AO) + np.arccos(cos_)
+            P = p["x0"] + 1j * p["y0"] + np.exp(1j * p["phi"]) * (A + (p["px"] + 1j * p["py"]) * np.exp(1j * th3))
+            return float(np.sqrt(np.mean(np.abs(P - targets) ** 2)))
+
+        lo = [c.real - 3 * size, c.imag - 3 * size, -np.pi, 0.05 * size, 0.1 * size, 0.1 * size, 0.1 * size, -3 * size, -3 * size]
+        hi = [c.real + 3 * size, c.imag + 3 * size, np.pi, 1.5 * size, 6 * size, 6 * size, 6 * size, 3 * size, 3 * size]
+        pso = []
+        for it in iterations:
+            t0 = time.perf_counter()
+            ens = particle_swarm_optimization(lambda lk, dims, pos: rms(dims), linkage, dimensions=9, n_particles=particles,
+                                              iterations=it, bounds=(lo, hi), order_relation=min, verbose=False)
+            wall = time.perf_counter() - t0
+            pso.append({"iterations": it, "particles": particles, "error": rms(ens.dimensions[0]), "wall_s": wall})
+            print(f"synthesis {kind}: PSO {it} iterations: rms {pso[-1]['error']:.3g} m in {wall:.2f} s", flush=True)
+        # Gradient: a fresh compile each curve would be unfair to neither: the first curve
+        # compiles, the second reuses (same N, same mode): both recorded.
+        grad = ps.synthesize(targets, alpha, starts=8, seed=0)
+        grad_free = ps.synthesize(targets, None, starts=8, seed=0)
+        best_pso = min(pso, key=lambda r: r["error"])
+        rows[kind] = {
+            "targets": n_targets, "error_measure": "rms distance of the coupler point to the targets (m)",
+            "gradient": {"error": grad.error, "wall_s": grad.wall_s, "compile_s": grad.compile_s, "evaluations": grad.evaluations,
+                         "method": "scipy least_squares (trf), exact implicit Jacobians, 8 random starts, prescribed crank angles"},
+            "gradient_free_crank_angles": {"error": grad_free.error, "wall_s": grad_free.wall_s, "compile_s": grad_free.compile_s},
+            "pylinkage_pso": pso,
+            "error_ratio_pso_best_to_gradient": best_pso["error"] / max(grad.error, 1e-300),
+            "time_ratio_pso_best_to_gradient": best_pso["wall_s"] / grad.wall_s,
+        }
+        print(grad.report, flush=True)
+    return rows
+
+
+def bench_tolerance(samples=100_000, scales=(1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.2)):
+    """First-order tolerance spread against 1e5-sample Monte Carlo as tolerances grow:
+    four-bar coupler point / rocker / transmission angle (two designs) and the flap's
+    travel and peak torque (its document design)."""
+    from examples import tolerance_study as ts
+    from examples.design_problems import FLAP_VARS
+    from jaxmech.scenes.flap_msd import DEFAULTS
+
+    out = {"samples": samples, "z": 3.0, "tolerance": "+-scale x |p_k| on every length and pivot coordinate, normal with t = 3 sigma"}
+    cases = {
+        "fourbar": (ts.fourbar_figures, ts.FOURBAR_DESIGNS, ts.FOURBAR_NAMES),
+        "flap_msd": (ts.flap_figures(31), {k: np.array([DEFAULTS[k]]) for k in FLAP_VARS}, FLAP_VARS),
+    }
+    for name, (fig, designs, names) in cases.items():
+        rows = []
+        for scale in scales:
+            t0 = time.perf_counter()
+            st = ts.tolerance_study(fig, designs, scale, samples=samples, names=names)
+            rows.append({"scale": scale, "wall_s": time.perf_counter() - t0,
+                         **{f: {k: np.asarray(v).tolist() for k, v in r.items()} for f, r in st.items()}})
+            print(f"tolerance {name} scale {scale:g}: " + ", ".join(f"{f} ratio {np.asarray(r['ratio']).round(3).tolist()}"
+                                                                      for f, r in st.items()), flush=True)
+        out[name] = rows
+    return out
+
+
 def main(argv=None):
     ap = base_parser("Design sweeps and sensitivities: throughput, memory, gradients vs finite differences.")
     ap.add_argument("--full", action="store_true", help="also 1e6 designs and the design problems")
     ap.add_argument("--problems", action="store_true", help="time the registered design problems (fit vs Nelder-Mead)")
     ap.add_argument("--flap", action="store_true", help="only the flap_msd comparison, merged into the existing JSON")
+    ap.add_argument("--synthesis", action="store_true", help="only path synthesis against pylinkage's swarm, merged")
+    ap.add_argument("--tolerance", action="store_true", help="only the tolerance study against Monte Carlo, merged")
     args = ap.parse_args(argv)
     setup_jax()
-    if args.flap:
+    parts = {"flap_problem": (args.flap, bench_flap_problem), "path_synthesis": (args.synthesis, bench_path_synthesis),
+             "tolerance": (args.tolerance, bench_tolerance)}
+    if any(on for on, _ in parts.values()):
         from benchmarks.common import load_result, machine_info
 
         old = load_result("design", out_dir=args.out) or {}
         payload = {k: v for k, v in old.items() if k not in ("benchmark", "machine")}
-        if "machine" in old:
-            payload["machine_of_other_sections"] = old["machine"]
-        payload["flap_problem"] = {**bench_flap_problem(), "machine": machine_info()}
+        payload.setdefault("machine_of_other_sections", old.get("machine"))
+        for key, (on, run) in parts.items():
+            if on:
+                payload[key] = {**run(), "machine": machine_info()}
         print(f"wrote {write_result('design', payload, out_dir=args.out)}")
         return
     sizes = [10**3] if args.quick else [10**3, 10**5] + ([10**6] if args.full else [])

@@ -9,17 +9,20 @@ one of the scenes, answers it with ``jaxmech.design`` and reports the answer in 
 - ``identify_fourbar``: link lengths and a damping coefficient of a loaded four-bar from
   noisy motion and torque records, with their Gauss-Newton standard errors.
 
-Every problem uses the engine's stroke solve (continuation, derivatives by the implicit
-function theorem).  The design problems minimise ``scene_figure`` objectives with
-``design.fit`` (optax L-BFGS from several starts at once); the identification is a
-least-squares problem and uses Levenberg-Marquardt on the engine's residual Jacobian.  Constraints are handled in one of two ways, stated
-per problem: *elimination* (an equality solved exactly for some of the parameters inside
-the objective: a projection onto the constraint) or an *exterior quadratic penalty*
-(``w * max(g, 0)^2``, whose optimum violates ``g <= 0`` by ``O(1/w)``; a back-off margin
-larger than that puts the answer strictly inside).
+``flap_msd`` is stated as an engineer states it (``flap_state``: the peak torque in
+epigraph form at every stroke sample, the travel equalities, a transmission-angle limit at
+every sample, a box) and solved by ``jaxmech.constrained.minimize`` (scipy SLSQP fed with
+exact Jacobians from one compiled program).  ``flap_msd_objective`` keeps the older
+statement (smooth peak, ``h`` and ``z`` eliminated) that ``benchmarks/design.py`` gives
+Nelder-Mead.  ``landing_gear`` and ``arc_track_flap`` minimise ``scene_figure`` objectives
+with ``design.fit`` (optax L-BFGS from several starts at once; the arc-track constraints by
+an exterior quadratic penalty ``w * max(g, 0)^2`` whose optimum violates ``g <= 0`` by
+``O(1/w)``, a back-off margin larger than that keeping the answer inside); the
+identification is a least-squares problem and uses Levenberg-Marquardt on the engine's
+residual Jacobian.
 
 Each function builds its objective once per setting (``functools.cache``), so a second
-call reuses the compiled fit loop.
+call reuses the compiled program.
 """
 
 from __future__ import annotations
