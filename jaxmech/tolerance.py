@@ -54,7 +54,8 @@ class ToleranceResult:
     - `value`: ``{figure: (D,)}`` nominal values; `jacobian`: ``{figure: {param: (D,)}}``.
     - `worst`: ``{figure: (D,)}`` worst-case half-spread ``sum |J_k| t_k``.
     - `rss`: ``{figure: (D,)}`` root-sum-square ``sqrt(sum (J_k t_k)^2)``; `std` = ``rss / z``.
-    - `ok`: ``(D,)`` designs whose figures and Jacobians are finite.
+    - `ok`: ``(D,)`` designs whose figures and Jacobians are all finite (a figure that is
+      not finite for a design has NaN spreads there; the others are kept).
     """
 
     value: dict
@@ -106,9 +107,10 @@ def analyse(figure: Callable, designs: Mapping, tol: Mapping[str, float], *, z: 
     value, jac = _jacobians(figure, names, varied, rest)
     value = {k: np.asarray(v) for k, v in value.items()}
     jac = {k: np.asarray(v) for k, v in jac.items()}
-    ok = np.all([np.isfinite(v) for v in value.values()], axis=0) & np.all([np.all(np.isfinite(j), axis=1) for j in jac.values()], axis=0)
-    worst = {k: np.where(ok, np.sum(np.abs(j) * t, axis=1), np.nan) for k, j in jac.items()}
-    rss = {k: np.where(ok, np.sqrt(np.sum(np.square(j * t), axis=1)), np.nan) for k, j in jac.items()}
+    good = {k: np.isfinite(value[k]) & np.all(np.isfinite(jac[k]), axis=1) for k in value}  # per figure
+    ok = np.all(list(good.values()), axis=0)
+    worst = {k: np.where(good[k], np.sum(np.abs(j) * t, axis=1), np.nan) for k, j in jac.items()}
+    rss = {k: np.where(good[k], np.sqrt(np.sum(np.square(j * t), axis=1)), np.nan) for k, j in jac.items()}
     return ToleranceResult(
         value=value, jacobian={k: {n: j[:, i] for i, n in enumerate(names)} for k, j in jac.items()},
         worst=worst, rss=rss, std={k: v / z for k, v in rss.items()}, ok=ok, z=float(z),
