@@ -87,13 +87,6 @@ def _flap_scene() -> Scene:
     return _lean(SCENE, _flap_torque)
 
 
-@functools.cache
-def _arc_scene() -> Scene:
-    from jaxmech.scenes.arc_track_flap import SCENE, quasi_static
-
-    return _lean(SCENE, lambda p, mo: {"T_R": (quasi_static(mo.q, mo.u, p)["T_R"], "N m")})
-
-
 # =========================================================================== 1. flap_msd
 #: Design variables of ``flap_msd``: loop 2 (bar BD, bar DGE, pivot B) and the E-G length.
 #: Loop 1 (crank, coupler, main flap) keeps the document's values, so the main flap moves
@@ -475,44 +468,48 @@ def landing_gear(*, steps: int = 60) -> GearDesign:
 # =========================================================================== 3. arc_track_flap
 ARC_FREE = ("a1", "a2", "alpha0")
 ARC_TORQUE_CAP = 1.1  #: cap on the peak raise torque, times the thesis design's
-ARC_MARGIN = 1e-4  #: back-off of every penalised constraint (relative)
-ARC_WEIGHT = 1e6  #: penalty weight (objective ~ 1): violation O(1e-6) < ARC_MARGIN
 
 
-def _arc_constraints(cols, p, cap):
-    """Normalised constraints ``g <= 0`` (see ``arc_track_flap``)."""
-    s34_f = cols["s34[m]"][-1]
-    return jnp.stack([
-        peak(cols["T_R[N m]"], "argmax") / cap - 1.0,  # screw torque cap
-        s34_f / p["a3"] - 1.0,  # stroke <= screw
-        p["a2"] / p["a1"] - 1.0,  # a1 > a2 (s34_i > 0)
-        p["c1"] / p["b1"] - 1.0,  # c1 < b1
-    ])
+def _arc_sample(p, s34):
+    """One stroke sample by the engine's solve from the cosine-rule pose (thesis eqs.
+    3.1.1-3.1.2, the flap not translated): ``(q, ok)``, differentiable by the implicit rule."""
+    from jaxmech.scenes.arc_track_flap import MECHANISM
+    from jaxmech.solve import solve_one
+    from jaxmech.status import Status
+
+    a1, a2 = jax.lax.stop_gradient(p["a1"]), jax.lax.stop_gradient(p["a2"])
+    s = jax.lax.stop_gradient(s34)
+    th12 = jnp.arccos((a1**2 + a2**2 - s**2) / (2 * a1 * a2))
+    th13 = jnp.pi - jnp.arccos((a1**2 + s**2 - a2**2) / (2 * a1 * s))
+    guess = jnp.stack([th12, th13, 0.0 * th12, 0.0 * th12])
+    assembled = jnp.all(jnp.isfinite(guess))
+    sol = solve_one(MECHANISM, jnp.reshape(s34, (1,)), p, jnp.where(assembled, guess, 0.0))
+    ok = assembled & (sol.status == Status.CONVERGED)
+    return jnp.where(ok, sol.q, jnp.where(assembled, guess, 1.0)), ok
 
 
-def _arc_depth(cols, p):
-    # Distance from A0 to the screw line: |Im(conj(e_s) (A0 - B0))| = a1 |sin(theta13)|;
-    # the fairing must clear its least value over the stroke.
-    return -peak(-p["a1"] * jnp.abs(jnp.sin(cols["theta13[rad]"])), "argmax")
+@functools.cache
+def arc_state(points: int, cap: float):
+    """``arc_track_flap`` as stated, for ``jaxmech.constrained``: ``x -> Stated`` over
+    ``ARC_FREE``: the depth (m, the least ``a1 |sin theta13|`` over the stroke, a one-row
+    peak: minimised) and ``le``: the raise torque over the cap at every stroke sample
+    (``T_R_i / cap - 1``), the stroke within the screw (``s34_f / a3 - 1``) and
+    ``a2 / a1 - 1`` (``a1 > a2``); ``ok``: every sample converged.  Each of the ``points``
+    samples (nut travel ``s34_i -> s34_f``) is solved on its own, so the program is small."""
+    from jaxmech.constrained import Stated
+    from jaxmech.scenes.arc_track_flap import SCENE, geometry, quasi_static
 
+    def state(x):
+        p = {**_jnp(SCENE.defaults), **x}
+        g = geometry(p)
+        s34 = g["s34_i"] + (g["s34_f"] - g["s34_i"]) * jnp.linspace(0.0, 1.0, points)
+        q, ok = jax.vmap(_arc_sample, (None, 0))(p, s34)
+        t_r = quasi_static(q, s34[:, None], p)["T_R"]
+        depth = -peak(-p["a1"] * jnp.abs(jnp.sin(q[:, 1])), "argmax")
+        le = jnp.concatenate([t_r / cap - 1.0, jnp.stack([g["s34_f"] / p["a3"] - 1.0, p["a2"] / p["a1"] - 1.0])])
+        return Stated(peak=jnp.reshape(depth, (1,)), le=le, ok=jnp.all(ok))
 
-@dataclasses.dataclass(frozen=True)
-class _ArcPenalised:
-    """depth / baseline + w sum max(g + margin, 0)^2 (hashable: one compile per cap)."""
-
-    cap: float
-    depth0: float
-
-    def __call__(self, cols, p):
-        g = _arc_constraints(cols, p, self.cap) + ARC_MARGIN
-        return _arc_depth(cols, p) / self.depth0 + ARC_WEIGHT * jnp.sum(jnp.square(jnp.maximum(g, 0.0)))
-
-
-def _arc_measures(points, p):
-    scene = _arc_scene()
-    full = {**{k: jnp.asarray(v) for k, v in scene.defaults.items()}, **p}
-    cols, status = design_columns(scene, points, full)
-    return _arc_depth(cols, full), peak(cols["T_R[N m]"], "argmax"), cols["s34[m]"][-1], jnp.all(status == 0)
+    return state
 
 
 @dataclasses.dataclass(frozen=True)
@@ -521,7 +518,8 @@ class FairingDesign:
 
     - `params`: every scene parameter of the design; `depth`, `baseline_depth` (m): least
       distance from A0 to the screw line over the stroke; `peak_T_R`, `baseline_peak_T_R`,
-      `cap` (N m, per jack); `s34_f` (m) stroke end (<= ``a3``).
+      `cap` (N m, per jack); `s34_f` (m) stroke end (<= ``a3``); `violation`: the largest
+      constraint violation (relative units).
     """
 
     params: dict
@@ -531,45 +529,65 @@ class FairingDesign:
     baseline_peak_T_R: float
     cap: float
     s34_f: float
-    fit: FitResult
+    violation: float
+    result: object
     report: str
 
 
-def arc_track_flap(*, points: int = 41, steps: int = 100, cap_factor: float = ARC_TORQUE_CAP, optimizer=None) -> FairingDesign:
+def arc_track_flap(*, points: int = 41, maxiter: int = 60, cap_factor: float = ARC_TORQUE_CAP) -> FairingDesign:
     """Shallowest fairing for the arc-track flap (Arslan 2022, cruise loads).
 
     **Problem.**  Minimise the fairing depth, the least distance from the remote centre A0
     to the screw line over the stroke (the thesis's ``h = a2 cos(beta3/2)`` = 228.89 mm for
     its design), over ``a1``, ``a2``, ``alpha0``, keeping the flap (``b1, c1, beta1..3``,
     rotation 35 deg), the screw (``a3``, thread) and the loads, subject to the thesis's
-    validity checks (Section 5.3: ``c1 < b1``, ``s34_f <= a3``, ``a1 > a2``; the pins stay
-    in their slots over the stroke by construction of the collinear design) and a cap
-    ``T_R <= cap_factor x`` the thesis design's peak raise torque.
+    validity checks (Section 5.3: ``s34_f <= a3``, ``a1 > a2``; ``c1 < b1`` holds as
+    neither is a design variable; the pins stay in their slots over the stroke by
+    construction of the collinear design) and ``T_R <= cap_factor x`` the thesis design's
+    peak raise torque at every stroke sample.
 
-    **Method.**  Constraints by an exterior quadratic penalty inside the objective
-    (``ARC_WEIGHT`` = 1e6 on dimensionless ``g``), each backed off by ``ARC_MARGIN`` =
-    1e-4 so that the penalty's O(1e-6) violation stays inside the feasible set; ``peak``
-    in ``"argmax"`` mode (the peaks sit at the stroke ends, where it is exact).  The
-    objective is the depth over the baseline depth.  ``design.fit``, L-BFGS, 3 starts.
+    **Method.**  Stated as it reads (``arc_state``) and solved by
+    ``jaxmech.constrained.minimize`` (SLSQP, exact Jacobians by one forward-mode program
+    through the position solve) from 3 starts; every constraint met to 1e-8.
 
     **Returns** a ``FairingDesign``; check it with ``scenes.arc_track_flap.validate``.
     """
+    from jaxmech.constrained import Program, minimize
     from jaxmech.scenes.arc_track_flap import SCENE
 
     p0 = dict(SCENE.defaults)
-    measure = jax.jit(functools.partial(_arc_measures, points))
-    depth0, tr0, _, ok0 = (float(x) for x in measure(_jnp({k: p0[k] for k in ARC_FREE})))
+    # The thesis design's figures through the same program (cap 1: le[i] + 1 = T_R_i).
+    x_doc = jnp.asarray([p0[k] for k in ARC_FREE])
+    probe = _arc_program(points, 1.0)
+    v, _, ok0 = probe.evaluate(x_doc)
+    if not bool(ok0):
+        raise RuntimeError("arc_track_flap: the thesis design does not solve over its stroke")
+    v = np.asarray(v)
+    depth0, tr0 = float(v[0]), float(np.max(v[1:1 + points]) + 1.0)
     cap = cap_factor * tr0
-    objective = _arc_objective(points, cap, depth0)
     starts = {"a1": p0["a1"] * np.array([1.0, 1.03, 0.98]), "a2": p0["a2"] * np.array([1.0, 0.95, 0.97]),
               "alpha0": p0["alpha0"] * np.array([1.0, 0.97, 1.02])}
     bounds = {"a1": (0.8 * p0["a1"], 1.2 * p0["a1"]), "a2": (0.6 * p0["a2"], 1.2 * p0["a2"]),
               "alpha0": (0.8 * p0["alpha0"], 1.2 * p0["alpha0"])}
-    res = fit(objective, starts, bounds=bounds, optimizer=optimizer or _lbfgs(), steps=steps)
+    # The cap enters only the torque rows, T_R_i / cap - 1 = (row at cap 1 + 1) / cap - 1:
+    # rescale the probe's rows instead of compiling a second program.
+    scale = np.ones(sum(probe.sizes))
+    scale[1:1 + points] = 1.0 / cap
+    shift = np.zeros_like(scale)
+    shift[1:1 + points] = 1.0 / cap - 1.0
+
+    def evaluate(x):
+        val, jac, ok = probe.evaluate(x)
+        return np.asarray(val) * scale + shift, np.asarray(jac) * scale[:, None], ok
+
+    prog = Program(probe.names, probe.sizes, evaluate, probe.compile_s)
+    res = minimize(arc_state(points, cap), starts, bounds, peak_scale=depth0, maxiter=maxiter, prog=prog)
     if res.best < 0:
         raise RuntimeError("arc_track_flap: no start produced a feasible design\n" + res.report())
     best = {**p0, **res.best_params}
-    depth, tr, s34_f, ok = (float(x) for x in measure(_jnp(res.best_params)))
+    v, _, _ = probe.evaluate(jnp.asarray([best[k] for k in ARC_FREE]))
+    v = np.asarray(v)
+    depth, tr, s34_f = float(v[0]), float(np.max(v[1:1 + points]) + 1.0), float((v[1 + points] + 1.0) * best["a3"])
     lines = [
         "arc_track_flap: least fairing depth with the validity checks and "
         f"T_R <= {cap_factor:g} x the thesis's peak",
@@ -577,16 +595,19 @@ def arc_track_flap(*, points: int = 41, steps: int = 100, cap_factor: float = AR
         f"  design: depth {1e3 * depth:.3f} mm ({100 * (1 - depth / depth0):.2f} % shallower), "
         f"peak T_R {tr:.4f} N m, s34_f {1e3 * s34_f:.2f} mm <= a3 {1e3 * best['a3']:.0f} mm",
         "  " + ", ".join(f"{k} {p0[k]:.6g} -> {best[k]:.6g}" for k in ARC_FREE),
-        f"  constraints by quadratic penalty (w = {ARC_WEIGHT:g}, margin {ARC_MARGIN:g})",
+        f"  constraints at every one of {points} stroke samples; largest violation {res.violation[res.best]:.2g}",
         res.report(),
     ]
-    return FairingDesign(params=best, depth=depth, baseline_depth=depth0, peak_T_R=tr, baseline_peak_T_R=tr0,
-                         cap=cap, s34_f=s34_f, fit=res, report="\n".join(lines))
+    return FairingDesign(params=best, depth=depth, baseline_depth=depth0, peak_T_R=tr, baseline_peak_T_R=tr0, cap=cap,
+                         s34_f=s34_f, violation=float(res.violation[res.best]), result=res, report="\n".join(lines))
 
 
 @functools.cache
-def _arc_objective(points, cap, depth0):
-    return scene_figure(_arc_scene(), _ArcPenalised(cap, depth0), points=points, name="penalised depth")
+def _arc_program(points, cap):
+    from jaxmech.constrained import program
+    from jaxmech.scenes.arc_track_flap import SCENE
+
+    return program(arc_state(points, cap), ARC_FREE, jnp.asarray([SCENE.defaults[k] for k in ARC_FREE]))
 
 
 # =========================================================================== 4. identification
