@@ -294,7 +294,7 @@ def bench_flap_problem(points=POINTS, starts=4):
         t0 = time.perf_counter()
         state = flap_state(points, mu)
         prog = program(state, FLAP_VARS, np.array([DEFAULTS[k] for k in FLAP_VARS]))
-        res = minimize(state, x0, flap_state_bounds(), peak_scale=3000.0, prog=prog, maxiter=100)
+        res = minimize(state, x0, flap_state_bounds(), peak_scale=3000.0, prog=prog, maxiter=300)
         wall = time.perf_counter() - t0
         rows[label] = {"objective": float(res.value[res.best]), "wall_s": wall, "compile_s": prog.compile_s,
                        "method": "scipy SLSQP on the epigraph statement (peak torque at every sample <= t, 2 equalities, "

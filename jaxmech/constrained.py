@@ -221,7 +221,9 @@ def minimize(
     - `prog`: a ``Program`` from an earlier call, to reuse (else compiled here).
 
     A start that cannot be assembled is moved halfway towards the first start until it
-    can (at most 20 times); the report says so.  After the optimiser stops, a few
+    can (at most 20 times); the report says so.  If the optimiser stops on a design that
+    cannot be assembled (SLSQP's line search may accept one), it is restarted from the
+    last assemblable iterate (at most 3 times, within `maxiter` in all).  After the optimiser stops, a few
     least-norm Gauss-Newton steps pull its last iterate onto the constraints (SQP iterates
     carry a violation of the order of their last step).
 
@@ -276,6 +278,8 @@ def minimize(
 
     def ge_jac(z):
         _, jac, ok = evaluate(z)
+        if ok:  # gradients are asked for at the iterates the line search accepted
+            accepted["z"] = z.copy()
         if not ok:
             return np.zeros((n_pk + n_le, z.size))
         top = np.hstack([-jac[:n_pk] / peak_scale, np.ones((n_pk, 1))])
@@ -306,9 +310,22 @@ def minimize(
             opts["ftol"] = tol
         else:
             opts.update(gtol=tol, xtol=tol)
-        res = scipy_minimize(lambda z: z[-1], z0, jac=lambda z: e_t, method=method, constraints=constraints,
-                             bounds=[(0.0, 1.0)] * len(names) + [(None, None)], options=opts)
-        z = _restore(evaluate, np.asarray(res.x, float), n_pk, n_eq, feas_tol)
+        accepted = {"z": z0.copy()}
+        restarts, nit = 0, 0
+        while True:
+            res = scipy_minimize(lambda z: z[-1], z0, jac=lambda z: e_t, method=method, constraints=constraints,
+                                 bounds=[(0.0, 1.0)] * len(names) + [(None, None)], options=opts)
+            nit += int(getattr(res, "nit", 0) or 0)
+            if evaluate(np.asarray(res.x, float))[2] or restarts == 3 or nit >= maxiter:
+                break
+            # The optimiser stopped on a design that cannot be assembled (a line search
+            # accepted it): go on from the last assemblable iterate, with a fresh model.
+            z0, restarts = accepted["z"].copy(), restarts + 1
+            opts["maxiter"] = max(maxiter - nit, 1)
+        z = np.asarray(res.x, float)
+        if not evaluate(z)[2]:
+            z = accepted["z"]
+        z = _restore(evaluate, z, n_pk, n_eq, feas_tol)
         v, _, ok = evaluate(z)
         x = lo + width * z[:-1]
         if ok:
@@ -321,7 +338,9 @@ def minimize(
             msg = "the start cannot be assembled: " + msg
         elif pulled:
             msg = f"start pulled {pulled}x halfway to start 0 to assemble; " + msg
-        rows.append((x, pk, viol, bool(res.success), msg, int(getattr(res, "nit", 0) or 0),
+        if restarts:
+            msg += f" (restarted {restarts}x from the last assemblable iterate)"
+        rows.append((x, pk, viol, bool(res.success), msg, nit,
                      counts["evals"] - before["evals"], counts["failed"] - before["failed"]))
     xs = np.stack([r[0] for r in rows])
     value = np.array([r[1] for r in rows])
