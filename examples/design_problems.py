@@ -309,7 +309,7 @@ class FlapDesign:
 
 
 def flap_msd(*, points: int = 101, starts: int | dict = 4, min_transmission: float = FLAP_MIN_TRANSMISSION,
-             method: str = "SLSQP", maxiter: int = 100) -> FlapDesign:
+             method: str = "SLSQP", maxiter: int = 300) -> FlapDesign:
     """Least peak motor torque for exactly 60 deg of second-flap travel (MSD double flap).
 
     **Problem.**  Over the stroke alpha = 275 -> 320 deg the document's design turns the
