@@ -170,6 +170,18 @@ def design_table(doc) -> str:
                          f"{_f(nm.get('run_s'), '{:.3f}')} | {_f(nm.get('best_value'), '{:.10g}')} | {evals} | {_f(r.get('speedup_run'), '{:.1f}x')} |")
     else:
         lines.append(f"Design problems: not run ({'; '.join(skipped) or 'python -m benchmarks.design --problems'}).")
+    fp = doc.get("flap_problem") or {}
+    if fp.get("gradient") and fp.get("nelder_mead"):
+        g, nm = fp["gradient"], fp["nelder_mead"]
+        lines += ["", f"flap_msd (`--flap`): constrained SLSQP {_f(g.get('objective'), '{:.2f}')} N m in {_f(g.get('wall_s'), '{:.1f}')} s "
+                  f"({_f(g.get('compile_s'), '{:.1f}')} s compiling), violation {_f(g.get('max_violation'), '{:.1e}')}; Nelder-Mead "
+                  f"{_f(nm.get('objective'), '{:.2f}')} N m after {_f(nm.get('wall_s'), '{:.1f}')} s; acceptance {fp.get('acceptance')}."]
+    ps = {k: v for k, v in (doc.get("path_synthesis") or {}).items() if isinstance(v, dict) and v.get("gradient")}
+    for kind, r in ps.items():
+        best = min(r.get("pylinkage_pso") or [{}], key=lambda x: x.get("error", float("inf")))
+        lines.append(f"Path synthesis `{kind}` (`--synthesis`): gradient rms {_f(r['gradient'].get('error'), '{:.2e}')} m in "
+                     f"{_f(r['gradient'].get('wall_s'), '{:.1f}')} s; pylinkage PSO best {_f(best.get('error'), '{:.2e}')} m in "
+                     f"{_f(best.get('wall_s'), '{:.1f}')} s.")
     return "\n".join(lines).rstrip()
 
 

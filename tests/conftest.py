@@ -1,5 +1,7 @@
 import os
+import sys
 import tempfile
+from pathlib import Path
 
 import jax
 
@@ -13,3 +15,7 @@ jax.config.update("jax_enable_x64", True)
 _CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(tempfile.gettempdir(), "jaxmech-test-xla-cache"))
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)  # as the library (jaxmech.cache)
+
+# The worked studies live in examples/ at the repository root (not in the package): make
+# ``import examples`` work from any working directory, relative to this file.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -9,17 +9,20 @@ one of the scenes, answers it with ``jaxmech.design`` and reports the answer in 
 - ``identify_fourbar``: link lengths and a damping coefficient of a loaded four-bar from
   noisy motion and torque records, with their Gauss-Newton standard errors.
 
-Every problem uses the engine's stroke solve (continuation, derivatives by the implicit
-function theorem).  The design problems minimise ``scene_figure`` objectives with
-``design.fit`` (optax L-BFGS from several starts at once); the identification is a
-least-squares problem and uses Levenberg-Marquardt on the engine's residual Jacobian.  Constraints are handled in one of two ways, stated
-per problem: *elimination* (an equality solved exactly for some of the parameters inside
-the objective: a projection onto the constraint) or an *exterior quadratic penalty*
-(``w * max(g, 0)^2``, whose optimum violates ``g <= 0`` by ``O(1/w)``; a back-off margin
-larger than that puts the answer strictly inside).
+``flap_msd`` is stated as an engineer states it (``flap_state``: the peak torque in
+epigraph form at every stroke sample, the travel equalities, a transmission-angle limit at
+every sample, a box) and solved by ``jaxmech.constrained.minimize`` (scipy SLSQP fed with
+exact Jacobians from one compiled program).  ``flap_msd_objective`` keeps the older
+statement (smooth peak, ``h`` and ``z`` eliminated) that ``benchmarks/design.py`` gives
+Nelder-Mead.  ``landing_gear`` and ``arc_track_flap`` minimise ``scene_figure`` objectives
+with ``design.fit`` (optax L-BFGS from several starts at once; the arc-track constraints by
+an exterior quadratic penalty ``w * max(g, 0)^2`` whose optimum violates ``g <= 0`` by
+``O(1/w)``, a back-off margin larger than that keeping the answer inside); the
+identification is a least-squares problem and uses Levenberg-Marquardt on the engine's
+residual Jacobian.
 
 Each function builds its objective once per setting (``functools.cache``), so a second
-call reuses the compiled fit loop.
+call reuses the compiled program.
 """
 
 from __future__ import annotations
@@ -32,10 +35,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .design import FitResult, fit, peak, scene_figure
-from .dynamics import Body, Gravity, Model, Moment, generalized_forces
-from .scenes.base import Scene
-from .sweep import design_columns
+from jaxmech.design import FitResult, fit, peak, scene_figure
+from jaxmech.dynamics import Body, Gravity, Model, Moment, generalized_forces
+from jaxmech.scenes.base import Scene
+from jaxmech.sweep import design_columns
 
 __all__ = [
     "FlapDesign",
@@ -72,23 +75,16 @@ def _flap_torque(p, mo):
     # corrections), equal to the scene's virtual-power torque (tests/seeds/test_flap_msd.py;
     # tests/test_problems.py checks the answer with run_scene) and cheaper to compile:
     # no reverse pass inside the objective's own gradient.
-    from .scenes.flap_msd import torque_document
+    from jaxmech.scenes.flap_msd import torque_document
 
     return {"torque": (torque_document(p, mo, corrected=True), "N m")}
 
 
 @functools.cache
 def _flap_scene() -> Scene:
-    from .scenes.flap_msd import SCENE
+    from jaxmech.scenes.flap_msd import SCENE
 
     return _lean(SCENE, _flap_torque)
-
-
-@functools.cache
-def _arc_scene() -> Scene:
-    from .scenes.arc_track_flap import SCENE, quasi_static
-
-    return _lean(SCENE, lambda p, mo: {"T_R": (quasi_static(mo.q, mo.u, p)["T_R"], "N m")})
 
 
 # =========================================================================== 1. flap_msd
@@ -104,7 +100,7 @@ FLAP_TEMPERATURE = 1.0  #: N m, temperature of the smooth peak (bound T log N)
 
 def _flap_theta_ends(p):
     """theta at alpha = 275 and 320 deg (rad), closed form (circle intersections)."""
-    from .scenes.flap_msd import ALPHA_END, ALPHA_START, closed_form_positions
+    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, closed_form_positions
 
     return closed_form_positions(p, ALPHA_START)[5], closed_form_positions(p, ALPHA_END)[5]
 
@@ -112,7 +108,7 @@ def _flap_theta_ends(p):
 @functools.cache
 def _flap_doc_theta_start() -> float:
     """The document's theta at alpha = 275 deg (rad): 0.024093 deg."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     with jax.ensure_compile_time_eval():  # a constant, also when first needed under a trace
         return float(_flap_theta_ends({k: jnp.asarray(v, jnp.float64) for k, v in DEFAULTS.items()})[0])
@@ -126,7 +122,7 @@ def _flap_project(free):
     parameters traced and the Jacobian held: at a root its derivative is
     ``-F_{hz}^{-1} F_free``, the implicit function theorem's, and its value is unchanged.
     """
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     base = _jnp(DEFAULTS)
     theta0 = _flap_doc_theta_start()
@@ -149,10 +145,6 @@ def _flap_project(free):
 
 def _flap_peak_smooth(cols, p):
     return peak(cols["torque[N m]"], "smooth", temperature=FLAP_TEMPERATURE)
-
-
-def _flap_peak_max(cols, p):
-    return peak(cols["torque[N m]"], "argmax")
 
 
 @functools.cache
@@ -180,20 +172,23 @@ def flap_msd_objective(points: int = 101):
 
 
 @functools.cache
-def _flap_max_batch(points: int):
-    fig = scene_figure(_flap_scene(), _flap_peak_max, points=points, name="peak torque")
-    return jax.jit(jax.vmap(lambda p: fig(p)[0]))
-
-
-@functools.cache
 def _flap_projection_batch():
-    return jax.jit(jax.vmap(lambda fr: _flap_project(fr)))
+    return jax.jit(jax.vmap(_flap_project))
+
+
+def flap_eliminated(free) -> dict[str, np.ndarray]:
+    """``{"h", "z"}`` (m) that meet the two travel equalities for the free lengths
+    ``{name: (S,)}`` over ``FLAP_FREE`` (as ``flap_msd_objective`` eliminates them); NaN
+    where they cannot be met."""
+    h, z, ok = _flap_projection_batch()(_jnp({k: np.atleast_1d(free[k]) for k in FLAP_FREE}))
+    ok = np.asarray(ok)
+    return {"h": np.where(ok, np.asarray(h), np.nan), "z": np.where(ok, np.asarray(z), np.nan)}
 
 
 def flap_starts(n: int = 4, *, seed: int = 0) -> dict[str, np.ndarray]:
     """``n`` starting designs for ``flap_msd``: the document's, then random ones within
     +-10 % of it (``numpy.random.default_rng(seed)``)."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     rng = np.random.default_rng(seed)
     scale = np.concatenate([[1.0], 1.0 + 0.1 * (2 * rng.random(n - 1) - 1)]) if n > 1 else np.ones(1)
@@ -208,9 +203,81 @@ def flap_starts(n: int = 4, *, seed: int = 0) -> dict[str, np.ndarray]:
 
 def flap_bounds() -> dict[str, tuple[float, float]]:
     """Box of ``flap_msd``'s free parameters: 0.7 to 1.3 times the document's values."""
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
     return {k: (0.7 * DEFAULTS[k], 1.3 * DEFAULTS[k]) for k in FLAP_FREE}
+
+
+#: Design variables of the constrained statement of ``flap_msd``: loops 2 and 3.
+FLAP_VARS = FLAP_FREE + FLAP_ELIMINATED
+FLAP_MIN_TRANSMISSION = 20.0 * _DEG  #: default least transmission angle of loops 2 and 3 (rad)
+
+
+def flap_state_bounds() -> dict[str, tuple[float, float]]:
+    """Box of the constrained ``flap_msd``: ``flap_bounds`` for the free lengths, 0.5-1.5
+    times the document's for ``h`` and ``z`` (no longer eliminated)."""
+    from jaxmech.scenes.flap_msd import DEFAULTS
+
+    return {**flap_bounds(), **{k: (0.5 * DEFAULTS[k], 1.5 * DEFAULTS[k]) for k in FLAP_ELIMINATED}}
+
+
+def _flap_sample(p, alpha):
+    """One stroke sample by the engine's position solve from the closed-form (dyad) guess:
+    ``(q, dq/dalpha, d2q/dalpha2, ok)``, differentiable in ``p`` by the implicit rule."""
+    from jaxmech.kinematics import input_derivatives
+    from jaxmech.scenes.flap_msd import closed_form_positions, mechanism
+    from jaxmech.positions import solve_one
+    from jaxmech.status import Status
+
+    guess = closed_form_positions(jax.lax.stop_gradient(p), alpha)
+    assembled = jnp.all(jnp.isfinite(guess))  # every dyad closes at this crank angle
+    guess = jnp.where(assembled, guess, 0.0)
+    u = jnp.reshape(alpha, (1,))
+    sol = solve_one(mechanism, u, p, guess)
+    ok = assembled & (sol.status == Status.CONVERGED)
+    q = jnp.where(ok, sol.q, guess)  # mask the inputs of what follows
+    d1, d2 = input_derivatives(mechanism, q, u, p)
+    return q, d1, d2, ok
+
+
+@functools.cache
+def flap_state(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSION):
+    """``flap_msd`` as an engineer states it, for ``jaxmech.constrained``: ``x -> Stated``
+    over ``FLAP_VARS`` (m).
+
+    - peak: the motor torque at ``points`` crank angles, 275 -> 320 deg at 1 rad/s (N m,
+      the energy method's closed form, equal to the virtual-power torque);
+    - eq: ``theta(275 deg) - theta_doc`` and ``theta(320) - theta(275) - 60 deg`` (rad);
+    - le: ``sin(min_transmission) - sin(mu)`` for the transmission angle ``mu`` of loops
+      2 (``-sin(phi - psi)``) and 3 (``cos(theta + xi)``) at every sample: a margin from
+      the toggles that bound the branch, i.e. a least normalised loop determinant
+      (``min_transmission = 0``: only assemblable on the branch, the unconstrained problem);
+    - ok: every sample assembled and converged on the branch.
+    """
+    import types
+
+    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS, torque_document
+    from jaxmech.constrained import Stated
+
+    alphas = jnp.linspace(ALPHA_START, ALPHA_END, points)
+    theta0 = _flap_doc_theta_start()
+    floor = float(np.sin(min_transmission))
+
+    def state(x):
+        p = {**_jnp(DEFAULTS), **x}
+        q, d1, d2, ok = jax.vmap(_flap_sample, (None, 0))(p, alphas)
+        # Constant crank speed 1 rad/s: q_dot = q', q_ddot = q''.
+        mo = types.SimpleNamespace(q=q, q_ddot=d2[..., 0, 0], dq_du=d1, u_dot=jnp.ones((points, 1), q.dtype))
+        theta = q[:, 5]
+        sin_mu = jnp.concatenate([-jnp.sin(q[:, 2] - q[:, 3]), jnp.cos(q[:, 5] + q[:, 4])])
+        return Stated(
+            peak=torque_document(p, mo, corrected=True),
+            eq=jnp.stack([theta[0] - theta0, theta[-1] - theta[0] - FLAP_TRAVEL]),
+            le=floor - sin_mu,
+            ok=jnp.all(ok),
+        )
+
+    return state
 
 
 @dataclasses.dataclass(frozen=True)
@@ -219,11 +286,12 @@ class FlapDesign:
 
     - `params`: every scene parameter of the optimised design (SI), for ``run_scene``.
     - `theta_travel`, `theta_start`: second-flap travel over the stroke and its angle at
-      alpha = 275 deg (rad, closed form: what the projection enforces).
-    - `peak_torque`, `document_peak_torque`: the sampled maximum of the motor torque over
-      the stroke (N m, ``peak(mode="argmax")`` at ``points`` samples).
-    - `improvement`: ``1 - peak_torque / document_peak_torque``.
-    - `fit`: the ``FitResult``; `report`: the answer in words.
+      alpha = 275 deg (rad, from the engine's solve at the stroke ends).
+    - `peak_torque`, `document_peak_torque`: the largest motor torque over the ``points``
+      stroke samples (N m).  `improvement`: ``1 - peak_torque / document_peak_torque``.
+    - `min_transmission`: least transmission angle of loops 2 and 3 over the stroke (rad).
+    - `violation`: largest constraint violation at the answer (rad, or the sine's units).
+    - `result`: the ``constrained.ConstrainedResult``; `report`: the answer in words.
     """
 
     params: dict
@@ -233,65 +301,96 @@ class FlapDesign:
     document_peak_torque: float
     document_theta_travel: float
     improvement: float
+    min_transmission: float
+    violation: float
     points: int
-    fit: FitResult
+    result: object
     report: str
 
 
-def flap_msd(*, points: int = 101, starts: int | dict = 4, steps: int = 100, optimizer=None) -> FlapDesign:
+def flap_msd(*, points: int = 101, starts: int | dict = 4, min_transmission: float = FLAP_MIN_TRANSMISSION,
+             method: str = "SLSQP", maxiter: int = 300) -> FlapDesign:
     """Least peak motor torque for exactly 60 deg of second-flap travel (MSD double flap).
 
     **Problem.**  Over the stroke alpha = 275 -> 320 deg the document's design turns the
-    second flap through 60.58 deg (goal: 60) with a peak motor torque of 3230.9 N m.
-    Choose the lengths of loops 2 and 3 so that theta turns through exactly 60 deg from
-    the same retracted start (theta(275 deg) = 0.0241 deg, the document's), with the
-    least peak torque.  Loop 1 is kept, so the main flap's motion is the document's.
+    second flap through 60.58 deg (goal: 60) with a peak motor torque of 3230.8 N m.
+    Choose the lengths of loops 2 and 3 (``FLAP_VARS``) so that theta turns through exactly
+    60 deg from the same retracted start (theta(275 deg) = 0.0241 deg, the document's),
+    with the least peak torque and no transmission angle of loops 2 or 3 below
+    `min_transmission` (default 20 deg; 0 leaves only assemblability on the branch: the
+    problem Nelder-Mead is given in ``benchmarks/design.py``, whose optimum sits within a
+    degree of loop 2's toggle at the stroke start).
+    Loop 1 is kept, so the main flap's motion is the document's.
 
-    **Method.**  Free: ``d, p, s, t, g`` (box 0.7-1.3 x the document's).  The two
-    equalities are met exactly by elimination: ``h`` and ``z`` are solved from them by
-    Newton on the closed-form end angles inside the objective (``flap_msd_objective``),
-    differentiated by the implicit function theorem.  Objective: the smooth peak of the
-    torque (``peak(mode="smooth")``, T = 1 N m); the answer's peak is then reported as the
-    sampled maximum (``mode="argmax"``).  ``design.fit`` with L-BFGS from `starts`.
+    **Method.**  Stated as it reads (``flap_state``): the peak in epigraph form
+    (``min t`` with ``torque_i <= t`` at every sample), the two equalities, the
+    transmission limits at every sample, the box ``flap_state_bounds``; solved by
+    ``jaxmech.constrained.minimize`` (scipy SLSQP or trust-constr) with the exact Jacobian
+    of every constraint at every sample from one compiled forward-mode program, from each
+    start in turn.
 
     **Arguments**: `points`: stroke samples; `starts`: number of starts (the document's
-    design first, see ``flap_starts``) or ``{name: (S,)}``; `steps`: step budget;
-    `optimizer`: an optax transformation (default ``optax.lbfgs()``).
+    design first, see ``flap_starts``; ``h`` and ``z`` start at the document's) or
+    ``{name: (S,)}`` over ``FLAP_VARS``; `method`, `maxiter`: the optimiser's.
 
     **Returns** a ``FlapDesign``.  **Raises** ``RuntimeError`` if no start is feasible.
     """
-    from .scenes.flap_msd import DEFAULTS
+    from jaxmech.constrained import minimize
+    from jaxmech.scenes.flap_msd import DEFAULTS
 
-    p0 = flap_starts(starts) if isinstance(starts, int) else dict(starts)
-    res = fit(flap_msd_objective(points), p0, bounds=flap_bounds(), optimizer=optimizer or _lbfgs(), steps=steps)
+    if isinstance(starts, int):
+        p0 = flap_starts(starts)
+        p0 = {**p0, **{k: np.full(starts, DEFAULTS[k]) for k in FLAP_ELIMINATED}}
+    else:
+        p0 = dict(starts)
+    state = flap_state(points, float(min_transmission))
+    doc = {k: np.asarray([DEFAULTS[k]]) for k in FLAP_VARS}
+    res = minimize(state, {k: p0[k] for k in FLAP_VARS}, flap_state_bounds(), peak_scale=3000.0, method=method,
+                   maxiter=maxiter, prog=_flap_program(points, float(min_transmission)))
     if res.best < 0:
         raise RuntimeError("flap_msd: no start produced a feasible design\n" + res.report())
-    free = res.best_params
-    h, z, ok = _flap_projection_batch()(_jnp({k: [v] for k, v in free.items()}))
-    if not bool(ok[0]):
-        raise RuntimeError("flap_msd: the winning design does not meet the travel equalities")
-    best = {**DEFAULTS, **free, "h": float(h[0]), "z": float(z[0])}
-    design_vars = FLAP_FREE + FLAP_ELIMINATED
-    batch = {k: jnp.asarray([DEFAULTS[k], best[k]]) for k in design_vars}
-    peaks = np.asarray(_flap_max_batch(points)(batch))
-    th0, th1 = (float(x) for x in _flap_theta_ends(_jnp(best)))
-    d0, d1 = (float(x) for x in _flap_theta_ends(_jnp(DEFAULTS)))
-    improvement = 1.0 - peaks[1] / peaks[0]
+    best = {**DEFAULTS, **res.best_params}
+    doc_eval = _flap_measure(points, float(min_transmission), doc)
+    new_eval = _flap_measure(points, float(min_transmission), {k: np.asarray([best[k]]) for k in FLAP_VARS})
+    improvement = 1.0 - new_eval["peak"] / doc_eval["peak"]
     lines = [
         "flap_msd: least peak motor torque with exactly 60 deg of second-flap travel",
-        f"  document: theta travel {np.rad2deg(d1 - d0):.4f} deg, peak torque {peaks[0]:.2f} N m",
-        f"  design:   theta travel {np.rad2deg(th1 - th0):.10f} deg (from {np.rad2deg(th0):.4f} deg), "
-        f"peak torque {peaks[1]:.2f} N m ({100 * improvement:.1f} % lower)",
-        "  lengths (m): " + ", ".join(f"{k} {DEFAULTS[k]:.5f} -> {best[k]:.5f}" for k in design_vars),
-        "  equalities by elimination (h, z solved exactly); objective: smooth peak, T = "
-        f"{FLAP_TEMPERATURE:g} N m; reported peak: sampled maximum over {points} points",
+        f"  document: theta travel {np.rad2deg(doc_eval['travel']):.4f} deg, peak torque {doc_eval['peak']:.2f} N m",
+        f"  design:   theta travel {np.rad2deg(new_eval['travel']):.10f} deg (from {np.rad2deg(new_eval['start']):.4f} deg), "
+        f"peak torque {new_eval['peak']:.2f} N m ({100 * improvement:.1f} % lower), "
+        f"least transmission angle {np.rad2deg(new_eval['mu']):.2f} deg (limit {np.rad2deg(min_transmission):g})",
+        "  lengths (m): " + ", ".join(f"{k} {DEFAULTS[k]:.5f} -> {best[k]:.5f}" for k in FLAP_VARS),
+        f"  peak in epigraph form over {points} samples; equalities and transmission limits as constraints; "
+        f"largest violation {res.violation[res.best]:.2g}",
         res.report(),
     ]
     return FlapDesign(
-        params=best, theta_travel=th1 - th0, theta_start=th0, peak_torque=float(peaks[1]),
-        document_peak_torque=float(peaks[0]), document_theta_travel=d1 - d0,
-        improvement=float(improvement), points=points, fit=res, report="\n".join(lines),
+        params=best, theta_travel=new_eval["travel"], theta_start=new_eval["start"], peak_torque=new_eval["peak"],
+        document_peak_torque=doc_eval["peak"], document_theta_travel=doc_eval["travel"],
+        improvement=float(improvement), min_transmission=new_eval["mu"], violation=float(res.violation[res.best]),
+        points=points, result=res, report="\n".join(lines),
     )
+
+
+def _flap_measure(points, min_transmission, design):
+    """Peak torque, travel, start angle and least transmission angle of one design,
+    through the same compiled program as the optimisation (values only)."""
+    prog = _flap_program(points, min_transmission)
+    v, _, ok = prog.evaluate(jnp.asarray([float(design[k][0]) for k in FLAP_VARS]))
+    v = np.asarray(v)
+    if not bool(ok):
+        raise RuntimeError(f"flap_msd: design {design} cannot be assembled over the stroke")
+    n = points
+    return {"peak": float(np.max(v[:n])), "start": float(v[n]) + _flap_doc_theta_start(), "travel": float(v[n + 1]) + FLAP_TRAVEL,
+            "mu": float(np.arcsin(np.sin(min_transmission) - np.max(v[n + 2:])))}
+
+
+@functools.cache
+def _flap_program(points, min_transmission):
+    from jaxmech.constrained import program
+    from jaxmech.scenes.flap_msd import DEFAULTS
+
+    return program(flap_state(points, min_transmission), FLAP_VARS, jnp.asarray([DEFAULTS[k] for k in FLAP_VARS]))
 
 
 @functools.cache
@@ -325,7 +424,7 @@ def _gear_misfit(cols, p):
 
 @functools.cache
 def _gear_objective():
-    from .scenes.landing_gear import SCENE
+    from jaxmech.scenes.landing_gear import SCENE
 
     # Only the ends of the stroke matter: two samples.
     return scene_figure(SCENE, _gear_misfit, points=2, name="gear misfit")
@@ -346,7 +445,7 @@ def landing_gear(*, steps: int = 60) -> GearDesign:
 
     **Returns** a ``GearDesign`` (m, rad).
     """
-    from .scenes.landing_gear import FT, design
+    from jaxmech.scenes.landing_gear import FT, design
 
     starts = {"d": FT * np.array([0.5, 1.0, 0.8, 0.7]), "h": FT * np.array([1.6, 1.5, 2.0, 1.4])}
     bounds = {"d": (0.2 * FT, 1.5 * FT), "h": (0.8 * FT, 3.0 * FT)}
@@ -369,44 +468,48 @@ def landing_gear(*, steps: int = 60) -> GearDesign:
 # =========================================================================== 3. arc_track_flap
 ARC_FREE = ("a1", "a2", "alpha0")
 ARC_TORQUE_CAP = 1.1  #: cap on the peak raise torque, times the thesis design's
-ARC_MARGIN = 1e-4  #: back-off of every penalised constraint (relative)
-ARC_WEIGHT = 1e6  #: penalty weight (objective ~ 1): violation O(1e-6) < ARC_MARGIN
 
 
-def _arc_constraints(cols, p, cap):
-    """Normalised constraints ``g <= 0`` (see ``arc_track_flap``)."""
-    s34_f = cols["s34[m]"][-1]
-    return jnp.stack([
-        peak(cols["T_R[N m]"], "argmax") / cap - 1.0,  # screw torque cap
-        s34_f / p["a3"] - 1.0,  # stroke <= screw
-        p["a2"] / p["a1"] - 1.0,  # a1 > a2 (s34_i > 0)
-        p["c1"] / p["b1"] - 1.0,  # c1 < b1
-    ])
+def _arc_sample(p, s34):
+    """One stroke sample by the engine's solve from the cosine-rule pose (thesis eqs.
+    3.1.1-3.1.2, the flap not translated): ``(q, ok)``, differentiable by the implicit rule."""
+    from jaxmech.scenes.arc_track_flap import MECHANISM
+    from jaxmech.positions import solve_one
+    from jaxmech.status import Status
+
+    a1, a2 = jax.lax.stop_gradient(p["a1"]), jax.lax.stop_gradient(p["a2"])
+    s = jax.lax.stop_gradient(s34)
+    th12 = jnp.arccos((a1**2 + a2**2 - s**2) / (2 * a1 * a2))
+    th13 = jnp.pi - jnp.arccos((a1**2 + s**2 - a2**2) / (2 * a1 * s))
+    guess = jnp.stack([th12, th13, 0.0 * th12, 0.0 * th12])
+    assembled = jnp.all(jnp.isfinite(guess))
+    sol = solve_one(MECHANISM, jnp.reshape(s34, (1,)), p, jnp.where(assembled, guess, 0.0))
+    ok = assembled & (sol.status == Status.CONVERGED)
+    return jnp.where(ok, sol.q, jnp.where(assembled, guess, 1.0)), ok
 
 
-def _arc_depth(cols, p):
-    # Distance from A0 to the screw line: |Im(conj(e_s) (A0 - B0))| = a1 |sin(theta13)|;
-    # the fairing must clear its least value over the stroke.
-    return -peak(-p["a1"] * jnp.abs(jnp.sin(cols["theta13[rad]"])), "argmax")
+@functools.cache
+def arc_state(points: int, cap: float):
+    """``arc_track_flap`` as stated, for ``jaxmech.constrained``: ``x -> Stated`` over
+    ``ARC_FREE``: the depth (m, the least ``a1 |sin theta13|`` over the stroke, a one-row
+    peak: minimised) and ``le``: the raise torque over the cap at every stroke sample
+    (``T_R_i / cap - 1``), the stroke within the screw (``s34_f / a3 - 1``) and
+    ``a2 / a1 - 1`` (``a1 > a2``); ``ok``: every sample converged.  Each of the ``points``
+    samples (nut travel ``s34_i -> s34_f``) is solved on its own, so the program is small."""
+    from jaxmech.constrained import Stated
+    from jaxmech.scenes.arc_track_flap import SCENE, geometry, quasi_static
 
+    def state(x):
+        p = {**_jnp(SCENE.defaults), **x}
+        g = geometry(p)
+        s34 = g["s34_i"] + (g["s34_f"] - g["s34_i"]) * jnp.linspace(0.0, 1.0, points)
+        q, ok = jax.vmap(_arc_sample, (None, 0))(p, s34)
+        t_r = quasi_static(q, s34[:, None], p)["T_R"]
+        depth = -peak(-p["a1"] * jnp.abs(jnp.sin(q[:, 1])), "argmax")
+        le = jnp.concatenate([t_r / cap - 1.0, jnp.stack([g["s34_f"] / p["a3"] - 1.0, p["a2"] / p["a1"] - 1.0])])
+        return Stated(peak=jnp.reshape(depth, (1,)), le=le, ok=jnp.all(ok))
 
-@dataclasses.dataclass(frozen=True)
-class _ArcPenalised:
-    """depth / baseline + w sum max(g + margin, 0)^2 (hashable: one compile per cap)."""
-
-    cap: float
-    depth0: float
-
-    def __call__(self, cols, p):
-        g = _arc_constraints(cols, p, self.cap) + ARC_MARGIN
-        return _arc_depth(cols, p) / self.depth0 + ARC_WEIGHT * jnp.sum(jnp.square(jnp.maximum(g, 0.0)))
-
-
-def _arc_measures(points, p):
-    scene = _arc_scene()
-    full = {**{k: jnp.asarray(v) for k, v in scene.defaults.items()}, **p}
-    cols, status = design_columns(scene, points, full)
-    return _arc_depth(cols, full), peak(cols["T_R[N m]"], "argmax"), cols["s34[m]"][-1], jnp.all(status == 0)
+    return state
 
 
 @dataclasses.dataclass(frozen=True)
@@ -415,7 +518,8 @@ class FairingDesign:
 
     - `params`: every scene parameter of the design; `depth`, `baseline_depth` (m): least
       distance from A0 to the screw line over the stroke; `peak_T_R`, `baseline_peak_T_R`,
-      `cap` (N m, per jack); `s34_f` (m) stroke end (<= ``a3``).
+      `cap` (N m, per jack); `s34_f` (m) stroke end (<= ``a3``); `violation`: the largest
+      constraint violation (relative units).
     """
 
     params: dict
@@ -425,45 +529,65 @@ class FairingDesign:
     baseline_peak_T_R: float
     cap: float
     s34_f: float
-    fit: FitResult
+    violation: float
+    result: object
     report: str
 
 
-def arc_track_flap(*, points: int = 41, steps: int = 100, cap_factor: float = ARC_TORQUE_CAP, optimizer=None) -> FairingDesign:
+def arc_track_flap(*, points: int = 41, maxiter: int = 60, cap_factor: float = ARC_TORQUE_CAP) -> FairingDesign:
     """Shallowest fairing for the arc-track flap (Arslan 2022, cruise loads).
 
     **Problem.**  Minimise the fairing depth, the least distance from the remote centre A0
     to the screw line over the stroke (the thesis's ``h = a2 cos(beta3/2)`` = 228.89 mm for
     its design), over ``a1``, ``a2``, ``alpha0``, keeping the flap (``b1, c1, beta1..3``,
     rotation 35 deg), the screw (``a3``, thread) and the loads, subject to the thesis's
-    validity checks (Section 5.3: ``c1 < b1``, ``s34_f <= a3``, ``a1 > a2``; the pins stay
-    in their slots over the stroke by construction of the collinear design) and a cap
-    ``T_R <= cap_factor x`` the thesis design's peak raise torque.
+    validity checks (Section 5.3: ``s34_f <= a3``, ``a1 > a2``; ``c1 < b1`` holds as
+    neither is a design variable; the pins stay in their slots over the stroke by
+    construction of the collinear design) and ``T_R <= cap_factor x`` the thesis design's
+    peak raise torque at every stroke sample.
 
-    **Method.**  Constraints by an exterior quadratic penalty inside the objective
-    (``ARC_WEIGHT`` = 1e6 on dimensionless ``g``), each backed off by ``ARC_MARGIN`` =
-    1e-4 so that the penalty's O(1e-6) violation stays inside the feasible set; ``peak``
-    in ``"argmax"`` mode (the peaks sit at the stroke ends, where it is exact).  The
-    objective is the depth over the baseline depth.  ``design.fit``, L-BFGS, 3 starts.
+    **Method.**  Stated as it reads (``arc_state``) and solved by
+    ``jaxmech.constrained.minimize`` (SLSQP, exact Jacobians by one forward-mode program
+    through the position solve) from 3 starts; every constraint met to 1e-8.
 
     **Returns** a ``FairingDesign``; check it with ``scenes.arc_track_flap.validate``.
     """
-    from .scenes.arc_track_flap import SCENE
+    from jaxmech.constrained import Program, minimize
+    from jaxmech.scenes.arc_track_flap import SCENE
 
     p0 = dict(SCENE.defaults)
-    measure = jax.jit(functools.partial(_arc_measures, points))
-    depth0, tr0, _, ok0 = (float(x) for x in measure(_jnp({k: p0[k] for k in ARC_FREE})))
+    # The thesis design's figures through the same program (cap 1: le[i] + 1 = T_R_i).
+    x_doc = jnp.asarray([p0[k] for k in ARC_FREE])
+    probe = _arc_program(points, 1.0)
+    v, _, ok0 = probe.evaluate(x_doc)
+    if not bool(ok0):
+        raise RuntimeError("arc_track_flap: the thesis design does not solve over its stroke")
+    v = np.asarray(v)
+    depth0, tr0 = float(v[0]), float(np.max(v[1:1 + points]) + 1.0)
     cap = cap_factor * tr0
-    objective = _arc_objective(points, cap, depth0)
     starts = {"a1": p0["a1"] * np.array([1.0, 1.03, 0.98]), "a2": p0["a2"] * np.array([1.0, 0.95, 0.97]),
               "alpha0": p0["alpha0"] * np.array([1.0, 0.97, 1.02])}
     bounds = {"a1": (0.8 * p0["a1"], 1.2 * p0["a1"]), "a2": (0.6 * p0["a2"], 1.2 * p0["a2"]),
               "alpha0": (0.8 * p0["alpha0"], 1.2 * p0["alpha0"])}
-    res = fit(objective, starts, bounds=bounds, optimizer=optimizer or _lbfgs(), steps=steps)
+    # The cap enters only the torque rows, T_R_i / cap - 1 = (row at cap 1 + 1) / cap - 1:
+    # rescale the probe's rows instead of compiling a second program.
+    scale = np.ones(sum(probe.sizes))
+    scale[1:1 + points] = 1.0 / cap
+    shift = np.zeros_like(scale)
+    shift[1:1 + points] = 1.0 / cap - 1.0
+
+    def evaluate(x):
+        val, jac, ok = probe.evaluate(x)
+        return np.asarray(val) * scale + shift, np.asarray(jac) * scale[:, None], ok
+
+    prog = Program(probe.names, probe.sizes, evaluate, probe.compile_s)
+    res = minimize(arc_state(points, cap), starts, bounds, peak_scale=depth0, maxiter=maxiter, prog=prog)
     if res.best < 0:
         raise RuntimeError("arc_track_flap: no start produced a feasible design\n" + res.report())
     best = {**p0, **res.best_params}
-    depth, tr, s34_f, ok = (float(x) for x in measure(_jnp(res.best_params)))
+    v, _, _ = probe.evaluate(jnp.asarray([best[k] for k in ARC_FREE]))
+    v = np.asarray(v)
+    depth, tr, s34_f = float(v[0]), float(np.max(v[1:1 + points]) + 1.0), float((v[1 + points] + 1.0) * best["a3"])
     lines = [
         "arc_track_flap: least fairing depth with the validity checks and "
         f"T_R <= {cap_factor:g} x the thesis's peak",
@@ -471,28 +595,31 @@ def arc_track_flap(*, points: int = 41, steps: int = 100, cap_factor: float = AR
         f"  design: depth {1e3 * depth:.3f} mm ({100 * (1 - depth / depth0):.2f} % shallower), "
         f"peak T_R {tr:.4f} N m, s34_f {1e3 * s34_f:.2f} mm <= a3 {1e3 * best['a3']:.0f} mm",
         "  " + ", ".join(f"{k} {p0[k]:.6g} -> {best[k]:.6g}" for k in ARC_FREE),
-        f"  constraints by quadratic penalty (w = {ARC_WEIGHT:g}, margin {ARC_MARGIN:g})",
+        f"  constraints at every one of {points} stroke samples; largest violation {res.violation[res.best]:.2g}",
         res.report(),
     ]
-    return FairingDesign(params=best, depth=depth, baseline_depth=depth0, peak_T_R=tr, baseline_peak_T_R=tr0,
-                         cap=cap, s34_f=s34_f, fit=res, report="\n".join(lines))
+    return FairingDesign(params=best, depth=depth, baseline_depth=depth0, peak_T_R=tr, baseline_peak_T_R=tr0, cap=cap,
+                         s34_f=s34_f, violation=float(res.violation[res.best]), result=res, report="\n".join(lines))
 
 
 @functools.cache
-def _arc_objective(points, cap, depth0):
-    return scene_figure(_arc_scene(), _ArcPenalised(cap, depth0), points=points, name="penalised depth")
+def _arc_program(points, cap):
+    from jaxmech.constrained import program
+    from jaxmech.scenes.arc_track_flap import SCENE
+
+    return program(arc_state(points, cap), ARC_FREE, jnp.asarray([SCENE.defaults[k] for k in ARC_FREE]))
 
 
 # =========================================================================== 4. identification
 def _fourbar_loops(q, u, p):
-    from .mechanism import cis
+    from jaxmech.mechanism import cis
 
     return [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d]
 
 
 def _loaded_fourbar():
-    from .mechanism import Mechanism, cis
-    from .scenes.classic import FOURBAR
+    from jaxmech.mechanism import Mechanism, cis
+    from jaxmech.scenes.classic import FOURBAR
 
     mech = Mechanism(
         name="loaded_fourbar",
