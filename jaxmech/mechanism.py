@@ -251,11 +251,11 @@ class Mechanism:
 
     def coord_is_length(self) -> np.ndarray:
         """Boolean mask over ``coords``: which dependent coordinates are lengths."""
-        return np.array([n in self.lengths for n in self.coords])
+        return np.array([n in self.lengths for n in self.coords], dtype=bool)
 
     def input_is_length(self) -> np.ndarray:
         """Boolean mask over ``inputs``: which driven coordinates are lengths."""
-        return np.array([n in self.inputs and n in self.lengths for n in self.inputs])
+        return np.array([n in self.inputs and n in self.lengths for n in self.inputs], dtype=bool)
 
     # ------------------------------------------------------------------ evaluation
     def vars_q(self, q) -> Vars:

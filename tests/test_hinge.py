@@ -127,3 +127,26 @@ def test_forward_dynamics_gradient_in_reverse_mode_against_the_closed_form():
             "c": swing * (-W / (2 * J_O)) * 2 * m * c}
     for name, value in want.items():
         assert abs(float(g[name]) - value) <= RTOL_FD_GRAD * abs(value), (name, float(g[name]), value)
+
+
+def test_one_implicit_rule_second_order_through_statics_and_forward_dynamics():
+    """``implicit.implicit_solution`` (the rule solve, statics and forward dynamics share)
+    against finite differences: the equilibrium angle in the stiffness and the moment
+    (second order, forward and reverse mode), and one step's final angle and rate in the
+    stiffness and the mass (second order in forward mode; first order in reverse mode:
+    test_forward_dynamics_gradient_in_reverse_mode_against_the_closed_form; the position
+    solve: test_solve's check_grads).  Reverse over reverse through a run is not claimed:
+    it gives half of d2/dk2 (measured, before and after the rule was shared; the rule
+    passes it through solve and statics), an open defect of forward dynamics."""
+    from jax.test_util import check_grads
+
+    def theta_star(k, M0):
+        return D.equilibrium(MODEL, {**P, "k": k, "M0": M0}, (-1.0, 2.0), ()).u[0]
+
+    check_grads(theta_star, (P["k"], P["M0"]), order=2, modes=("fwd", "rev"))
+
+    def final(k, m):
+        tr = D.forward_dynamics(MODEL, {**P, "k": k, "m": m}, 0.2, 0.0, (), h=0.05 / W, steps=1)
+        return jnp.stack([tr.u[-1, 0], tr.u_dot[-1, 0]])
+
+    check_grads(final, (P["k"], P["m"]), order=2, modes=("fwd",))

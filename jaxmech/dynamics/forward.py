@@ -19,6 +19,7 @@ import numpy as np
 
 from .._linalg import solve_small
 from ..actuators import DCMotor, parameter_names
+from ..implicit import implicit_solution
 from ..inputs import as_coords, as_inputs
 from ..options import SolverOptions
 from ..positions import solve
@@ -28,7 +29,7 @@ from .model import Model, mechanism_params, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
 
-__all__ = ["METHODS", "Trajectory", "Integrator", "rhs", "integrate", "forward_dynamics"]
+__all__ = ["METHODS", "Trajectory", "Integrator", "rhs", "stage_residual", "integrate", "forward_dynamics"]
 
 
 def _tableau(name):
@@ -135,35 +136,12 @@ def rhs(integ: Integrator, p, t, y, qg):
     return jnp.where(ok, f, jnp.nan)
 
 
-def _stage_residual(integ, A, c, Z, args):
-    """Stage equations ``G(Z) = Z - h A F(y + Z)`` (``Z_i = Y_i - y_n``)."""
+def stage_residual(integ: Integrator, A, c, Z, args):
+    """Stage equations ``G(Z, args) = Z - h A F(y + Z)`` (``Z_i = Y_i - y_n``) of the
+    tableau ``(A, c)`` (numpy arrays), ``args = (y, qg, p, t, h)``."""
     y, qg, p, t, h = args
     F = jax.vmap(lambda ci, zi: rhs(integ, p, t + ci * h, y + zi, qg))(c, Z)
     return Z - h * (jnp.asarray(A, Z.dtype) @ F)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _attach_stages(G, Z_star, args):
-    """Identity on the converged stages ``Z*``; tangent ``dZ = -G_Z^{-1} G_args dargs``
-    (implicit function theorem on ``G(Z*, args) = 0``).  Written as a custom JVP rather than
-    ``jax.lax.custom_root``, which traces the linearization of ``G`` (third derivatives of
-    the positions) on every call, differentiated or not."""
-    return Z_star
-
-
-@_attach_stages.defjvp
-def _attach_stages_jvp(G, primals, tangents):
-    Z_star, args = primals
-    _, dargs = tangents
-    Z = _attach_stages(G, Z_star, args)
-    ok = jnp.all(jnp.isfinite(Z))
-    Zs = jnp.where(ok, Z, jnp.zeros_like(Z))
-    k = Z.size
-    jz = jax.jacfwd(lambda z: G(z, args))(Zs).reshape(k, k)
-    jz = jnp.where(ok & jnp.all(jnp.isfinite(jz)), jz, jnp.eye(k, dtype=jz.dtype))
-    _, g_args = jax.jvp(lambda a: G(Zs, a), (args,), (dargs,))
-    dZ = -jnp.linalg.solve(jz, g_args.reshape(-1)).reshape(Z.shape)
-    return Z, jnp.where(ok, dZ, jnp.zeros_like(dZ))
 
 
 def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
@@ -224,8 +202,13 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
             return Z, it, err
 
         Z_star, it, err = newton(jnp.zeros((s, n), y.dtype))
-        G = functools.partial(_stage_residual, integ, A_np, c_np)
-        Z = _attach_stages(G, stop(Z_star), (y, qg, p, t, h))
+        # The converged stages attached to their arguments by the implicit rule on
+        # G(Z*, args) = 0: dZ = -G_Z^{-1} G_args dargs (a custom JVP rather than
+        # jax.lax.custom_root, which traces the linearization of G, third derivatives of the
+        # positions, on every call, differentiated or not).
+        G = functools.partial(stage_residual, integ, A_np, c_np)
+        Z_star = stop(Z_star)
+        Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, p, t, h))
         y_new = y + d @ Z
         q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters)
         conv = (err >= 0) & (err <= 1e3 * newton_tol)
@@ -262,7 +245,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     and ``h`` the inverse-dynamics force at zero input acceleration (for one input
     ``h = (1/2) M'(u) u_dot^2 - Q``); with an inductive motor the state also holds the
     current, ``L di/dt = v - R i - n K w``.  Every stage closes the loop (a fixed number of
-    Newton steps from the step's start, attached to ``(u, p)`` by ``solve.implicit_root``),
+    Newton steps from the step's start, attached to ``(u, p)`` by ``implicit.implicit_root``),
     and the stage equations ``Z = h A F(y + Z)`` are solved by simplified Newton (one
     iteration matrix per step, from a finite-difference Jacobian) and attached to their
     arguments by a custom JVP (the implicit function theorem on the stage equations:
