@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._linalg import solve_small
+from ..linalg import solve_small
 from ..actuators import DCMotor, parameter_names
 from ..implicit import implicit_solution
 from ..inputs import as_coords, as_inputs
@@ -29,7 +29,7 @@ from .model import Model, mechanism_params, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
 
-__all__ = ["METHODS", "Trajectory", "Integrator", "rhs", "stage_residual", "integrate", "forward_dynamics"]
+__all__ = ["METHODS", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "integrate", "forward_dynamics"]
 
 
 def _tableau(name):
@@ -95,7 +95,9 @@ class Integrator:
       (``jaxmech.actuators``: a ``DCMotor`` with its voltage, an ``OilCylinder``...); their
       states follow ``(u, u_dot)`` in the state vector, in this order.
     - `close_iters`: Newton steps that close the loop at each stage (``close_loop``).
-    - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment) and budget.
+    - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment; ``None``:
+      ``newton_tolerance`` of the dtype) and budget.
+    - `options`: the user's ``SolverOptions`` (the loop closures' ``ftol`` and ``cond_max``).
     """
 
     model: Model
@@ -104,8 +106,16 @@ class Integrator:
     load: Callable | None = None
     actuators: tuple = ()
     close_iters: int = 5
-    newton_tol: float = 1e-12
+    newton_tol: float | None = None
     newton_max: int = 12
+    options: SolverOptions = SolverOptions()
+
+
+def newton_tolerance(dtype) -> float:
+    """Default stage-Newton tolerance on the scaled increment: ``4096 eps`` of ``dtype``
+    (9.1e-13 in float64): the stages then hold their converged digits to a few thousand
+    round-off units, well below the method's truncation error at any usable step."""
+    return 4096.0 * float(jnp.finfo(dtype).eps)
 
 
 def rhs(integ: Integrator, p, t, y, qg):
@@ -116,7 +126,7 @@ def rhs(integ: Integrator, p, t, y, qg):
     mech = model.mechanism
     dof = mech.dof
     u, ud = y[:dof], y[dof : 2 * dof]
-    q, ok = close_loop(mech, u, p, qg, iters)
+    q, ok = close_loop(mech, u, p, qg, iters, integ.options)
     M = mass_matrix(model, q, u, p)
     # h(u, u_dot, t): the inverse-dynamics force at zero input acceleration
     # (for one input: (1/2) M'(u) u_dot^2 - Q(u, u_dot, t)).
@@ -153,7 +163,8 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
     **Returns** ``(ys (steps+1, n), qs (steps+1, m), status, t_stop, newton (steps,))``.
     """
     model, method, steps, iters = integ.model, integ.method, integ.steps, integ.close_iters
-    newton_tol, newton_max = integ.newton_tol, integ.newton_max
+    newton_max = integ.newton_max
+    newton_tol = newton_tolerance(y0.dtype) if integ.newton_tol is None else integ.newton_tol
     mech = model.mechanism
     dof = mech.dof
     A_np, c_np, d_np = _tableau(method)
@@ -210,7 +221,7 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
         Z_star = stop(Z_star)
         Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, p, t, h))
         y_new = y + d @ Z
-        q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters)
+        q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters, integ.options)
         conv = (err >= 0) & (err <= 1e3 * newton_tol)
         finite = jnp.all(jnp.isfinite(y_new))
         out_of_stroke = jnp.any(y_new[:dof] < lo) | jnp.any(y_new[:dof] > hi)
@@ -238,7 +249,7 @@ _integrate_jit = jax.jit(integrate, static_argnums=0)
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
                      motor: DCMotor | None = None, voltage=None, current0=0.0, motor_input: str | None = None,
                      actuators: Mapping | None = None, load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
-                     newton_tol: float = 1e-12, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
+                     newton_tol: float | None = None, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
     """Integrate the equations of motion in the inputs, with fixed steps (one design).
 
     ``M(u) u_ddot + h(u, u_dot, t) = tau_load + tau_motor`` where ``M`` is ``mass_matrix``
@@ -271,10 +282,11 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``
       (arrays; ``p`` a dict), e.g. a controller or a prescribed torque.
     - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
-    - `newton_tol`: stage-Newton tolerance on the scaled increment; `newton_max`: its budget.
+    - `newton_tol`: stage-Newton tolerance on the scaled increment (default
+      ``newton_tolerance(dtype)``: ``4096 eps``); `newton_max`: its budget.
     - `close_iters`: Newton steps that close the loop at each stage from the step's start
       (the step must be small enough for them to converge; a failure is reported).
-    - `options`: settings of the initial position solve.
+    - `options`: ``SolverOptions`` of the initial position solve and of every loop closure.
 
     **Returns** a ``Trajectory``.  A run that reaches a singular or unassemblable position,
     a failed step or the stroke end stops there with its ``DynStatus``; later rows are NaN.
@@ -320,7 +332,8 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
         hi = jnp.full((mech.dof,), jnp.inf, dtype)
     else:
         lo, hi = (jnp.broadcast_to(jnp.asarray(b, dtype), (mech.dof,)) for b in stroke)
-    integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters), float(newton_tol), int(newton_max))
+    integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters),
+                       None if newton_tol is None else float(newton_tol), int(newton_max), options)
     ys, qs, status, t_stop, its = _integrate_jit(integ, pj, jnp.asarray(t0, dtype), jnp.asarray(h, dtype), y0, sol.q, lo, hi)
     status = jnp.where(sol.status == Status.CONVERGED, status, DynStatus.POSITION).astype(jnp.int32)
     dof = mech.dof

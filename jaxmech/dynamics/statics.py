@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._linalg import solve_small
+from ..linalg import solve_small
 from ..actuators import Spec, resolve, spec_names
 from ..implicit import implicit_root, implicit_solution
 from ..inputs import as_coords, as_inputs
@@ -151,7 +151,7 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
                              (jnp.where(good, q, jnp.nan), good, p, t))
     # Close the loop at the final input (a few Newton steps from the last iterate's q, which is
     # within one quadratically small step) and attach it to (u_eq, p).
-    q_eq, q_ok = close_loop(mech, u_eq, p, jnp.where(good, q, guess), 3)
+    q_eq, q_ok = close_loop(mech, u_eq, p, jnp.where(good, q, guess), 3, options)
     good = good & q_ok
     status = jnp.where((status == DynStatus.OK) & ~q_ok, DynStatus.POSITION, status)
     # The stiffness is the last iterate's Jacobian (one Newton step away: a diagnostic).
