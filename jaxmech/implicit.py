@@ -21,7 +21,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
-from ._linalg import solve_blocks, solve_small, where
+from .linalg import solve_blocks, solve_small, where
 from .mechanism import Mechanism
 from .structure import blocks
 
