@@ -19,7 +19,8 @@ import numpy as np
 
 from ..linalg import solve_small
 from ..actuators import DCMotor, parameter_names
-from ..implicit import implicit_solution
+from ..implicit import implicit_root, implicit_solution
+from ..mechanism import Vars
 from ..inputs import as_coords, as_inputs
 from ..options import SolverOptions
 from ..positions import solve
@@ -90,7 +91,8 @@ class Integrator:
     program's identity; numbers that change between runs are arguments of ``integrate``).
 
     - `model`: the ``Model``; `method`: one of ``METHODS``; `steps`: number of steps.
-    - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``, or None.
+    - `load`: extra generalized force at the inputs, ``fn(q, u, p, v, t) -> (dof,)`` (the
+      convention of ``Moment`` and ``PointForce``), or None.
     - `actuators`: ``((input index, actuator), ...)``, each a ``StatefulActuator``
       (``jaxmech.actuators``: a ``DCMotor`` with its voltage, an ``OilCylinder``...); their
       states follow ``(u, u_dot)`` in the state vector, in this order.
@@ -133,7 +135,11 @@ def rhs(integ: Integrator, p, t, y, qg):
     hvec, _ = generalized_forces(model, q, u, ud, jnp.zeros_like(ud), p, t)
     tau = jnp.zeros_like(u)
     if load is not None:
-        tau = tau + jnp.reshape(load(t, q, u, ud, p), (dof,))
+        # The convention of every load: fn(q, u, p, v, t) with names (Moment, PointForce),
+        # v the coordinates' and inputs' rates (q_dot = dq/du u_dot, implicit).
+        _, qd = jax.jvp(lambda u_: implicit_root(mech, jax.lax.stop_gradient(q), ok, u_, p), (u,), (ud,))
+        v = Vars({**{n: qd[i] for i, n in enumerate(mech.coords)}, **{n: ud[i] for i, n in enumerate(mech.inputs)}})
+        tau = tau + jnp.reshape(load(mech.vars_q(q), mech.vars_u(u), Vars(p), v, t), (dof,))
     # Each actuator: its force on its input, and the rates of its own states (StatefulActuator).
     rates, at = [], 2 * dof
     for k_in, act in integ.actuators:
@@ -279,8 +285,11 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     - `actuators`: ``{input name: actuator}``, further ``StatefulActuator``s (an
       ``OilCylinder``...), each on its input, with states of their own started at their
       ``initial_state(p)``; their parameters join `p` like the motor's.
-    - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``
-      (arrays; ``p`` a dict), e.g. a controller or a prescribed torque.
+    - `load`: extra generalized force at the inputs (N m or N), ``fn(q, u, p, v, t) ->
+      (dof,)``, the convention of every load (``Moment``, ``PointForce``): `q`, `u`, `p`
+      and the rates `v` (coordinates' and inputs', ``v.theta2``) by name, `t` in s; e.g. a
+      controller or a prescribed torque (``dict(p)`` gives the mapping the library's
+      functions take).
     - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
     - `newton_tol`: stage-Newton tolerance on the scaled increment (default
       ``newton_tolerance(dtype)``: ``4096 eps``); `newton_max`: its budget.
