@@ -44,7 +44,6 @@ def _safe_tangent(ok, tree):
     return jax.tree_util.tree_map(one, tree)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 4))
 def implicit_solution(residual: Callable, x_star, ok, args, structure=None):
     """Attach a root ``x*`` of ``residual(x, args) = 0`` to ``args`` for differentiation
     (the identity on values): the one implicit-function rule of the package.
@@ -72,15 +71,27 @@ def implicit_solution(residual: Callable, x_star, ok, args, structure=None):
       known: one small solve per diagonal block; ``None``: one dense small solve.
 
     **Returns** ``x_star``, with the derivative above.
+
+    The rule is called under ``jax.checkpoint``: without it, inside a ``lax.scan`` (forward
+    dynamics' steps) reverse mode over reverse or forward mode gave half the second
+    derivative on jax 0.10.2, for ``jax.lax.custom_root`` alike (a minimal reproduction:
+    ``tests/test_hinge.py``).  Nothing is recomputed unless a derivative is taken.
     """
+    attach = lambda x_, ok_, a_: _attach(residual, x_, ok_, a_, structure)  # noqa: E731
+    return jax.checkpoint(attach, prevent_cse=False)(x_star, ok, args)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 4))
+def _attach(residual, x_star, ok, args, structure):
+    """``x_star`` attached to ``args`` (``implicit_solution``'s custom JVP)."""
     return x_star
 
 
-@implicit_solution.defjvp
+@_attach.defjvp
 def _implicit_solution_jvp(residual, structure, primals, tangents):
     x_star, ok, args = primals
     _, _, dargs = tangents
-    x = implicit_solution(residual, x_star, ok, args, structure)  # differentiable again: second order follows
+    x = _attach(residual, x_star, ok, args, structure)  # differentiable again: second order follows
     x_s = _safe(ok, x, jnp.zeros_like)
     args_s = _safe(ok, args, jnp.ones_like)
     _, rhs = jax.jvp(lambda a: residual(x_s, a), (args_s,), (_safe_tangent(ok, dargs),))

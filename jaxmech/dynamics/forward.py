@@ -245,7 +245,11 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
         return (y_next, q_next, status_next, t_stop), (jnp.where(accept, y_new, jnp.nan), jnp.where(accept, q_new, jnp.nan), it)
 
     init = (y0, q0, jnp.asarray(DynStatus.OK, jnp.int32), t0)
-    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(step, init, jnp.arange(steps, dtype=y0.dtype))
+    # The step under jax.checkpoint: without it, reverse mode differentiated again (forward
+    # or reverse over reverse) lost half of second derivatives through the scan on jax
+    # 0.10.2 (tests/test_hinge.py); reverse mode recomputes a step instead of storing it.
+    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(jax.checkpoint(step, prevent_cse=False), init,
+                                                         jnp.arange(steps, dtype=y0.dtype))
     return jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its
 
 
