@@ -44,7 +44,7 @@ def _safe_tangent(ok, tree):
     return jax.tree_util.tree_map(one, tree)
 
 
-def implicit_solution(residual: Callable, x_star, ok, args, structure=None):
+def implicit_solution(residual: Callable, x_star, ok, args, structure=None, *, checkpoint: bool = False):
     """Attach a root ``x*`` of ``residual(x, args) = 0`` to ``args`` for differentiation
     (the identity on values): the one implicit-function rule of the package.
 
@@ -69,14 +69,17 @@ def implicit_solution(residual: Callable, x_star, ok, args, structure=None):
     - `args`: a pytree of what ``x*`` depends on; non-floating leaves get no derivative.
     - `structure`: the block-triangular order of ``F_x`` (``structure.blocks``) when one is
       known: one small solve per diagonal block; ``None``: one dense small solve.
+    - `checkpoint`: call the rule under ``jax.checkpoint``: needed inside a ``lax.scan``
+      that is differentiated twice with reverse mode first (forward dynamics' steps):
+      without it jax 0.10.2 gave half the second derivative there (forward or reverse
+      over reverse), ``jax.lax.custom_root`` alike (``tests/test_hinge.py``).  Off by
+      default: it made the reverse-mode programs of the position solve ~1.5x longer to
+      compile (flap_msd's gradient test, 37 s to 58 s).
 
     **Returns** ``x_star``, with the derivative above.
-
-    The rule is called under ``jax.checkpoint``: without it, inside a ``lax.scan`` (forward
-    dynamics' steps) reverse mode over reverse or forward mode gave half the second
-    derivative on jax 0.10.2, for ``jax.lax.custom_root`` alike (a minimal reproduction:
-    ``tests/test_hinge.py``).  Nothing is recomputed unless a derivative is taken.
     """
+    if not checkpoint:
+        return _attach(residual, x_star, ok, args, structure)
     attach = lambda x_, ok_, a_: _attach(residual, x_, ok_, a_, structure)  # noqa: E731
     return jax.checkpoint(attach, prevent_cse=False)(x_star, ok, args)
 

@@ -152,8 +152,8 @@ def test_implicit_rule_inside_a_scan_second_order_in_reverse_mode():
     """The rule inside ``lax.scan`` (as forward dynamics' steps use it), reverse over
     reverse and forward over reverse, against the closed form: one implicit Euler step
     of ``x' = -k x`` from ``x = 1`` with ``h = 0.1`` solves ``z = -h k (1 + z)``, so
-    ``x1 = 1 / (1 + h k)`` and ``d2 x1/dk2 = 2 h^2 / (1 + h k)^3``.  (Without the
-    ``jax.checkpoint`` around the rule, jax 0.10.2 gave half of it, as it does for
+    ``x1 = 1 / (1 + h k)`` and ``d2 x1/dk2 = 2 h^2 / (1 + h k)^3``.  (Without
+    ``checkpoint=True``, jax 0.10.2 gives half of it, as it does for
     ``jax.lax.custom_root``.)"""
     from jaxmech.implicit import implicit_solution
 
@@ -163,7 +163,7 @@ def test_implicit_rule_inside_a_scan_second_order_in_reverse_mode():
 
     def step(x, k):
         z_star = jax.lax.stop_gradient(-0.1 * k * x / (1 + 0.1 * k))  # the solver's root
-        return x + implicit_solution(euler_stage, z_star, jnp.asarray(True), (x, k)), None
+        return x + implicit_solution(euler_stage, z_star, jnp.asarray(True), (x, k), checkpoint=True), None
 
     def x1(k):
         return jax.lax.scan(lambda x, _: step(x, k), jnp.ones(1), None, length=1)[0][0]

@@ -225,7 +225,7 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
         # positions, on every call, differentiated or not).
         G = functools.partial(stage_residual, integ, A_np, c_np)
         Z_star = stop(Z_star)
-        Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, p, t, h))
+        Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, p, t, h), checkpoint=True)
         y_new = y + d @ Z
         q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters, integ.options)
         conv = (err >= 0) & (err <= 1e3 * newton_tol)
