@@ -38,7 +38,8 @@ def chain_mechanism(k: int):
             crank = t4
         return loops
 
-    return Mechanism(name=f"chain{k}", coords=coords, inputs=("theta2",), params=("a", "b", "c", "d"), constraints=constraints)
+    return Mechanism(name=f"chain{k}", coords=coords, inputs=("theta2",), params=("a", "b", "c", "d"),
+                     lengths=("a", "b", "c", "d"), constraints=constraints)
 
 
 def chain_solution(k: int, th2: np.ndarray) -> np.ndarray:

@@ -27,8 +27,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import cond1, small_max, small_norm, solve_blocks, where
-from ._xla import unfused
+from .linalg import cond1, small_max, small_norm, solve_blocks, where
+from .xla import unfused
 from .mechanism import Mechanism
 from .structure import blocks
 from .implicit import attach_derivatives, implicit_root, root_derivatives

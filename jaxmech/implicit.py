@@ -1,8 +1,10 @@
-"""Implicit derivatives of a converged root: the implicit function theorem as custom JVPs.
+"""Implicit derivatives of a converged root: the implicit function theorem as one custom JVP.
 
-Derivatives never go through the Newton iterations.  The converged root ``q*`` is
-attached to ``(u, p)`` by a custom JVP that implements the implicit function theorem:
-differentiating ``Phi(q*(u, p), u, p) = 0`` gives
+Derivatives never go through the Newton iterations.  ``implicit_solution`` attaches any
+converged root to its arguments; the position solve (``implicit_root``: ``q*`` attached to
+``(u, p)``), statics (the equilibrium inputs) and forward dynamics (the Runge-Kutta stages)
+all use it with their own residual.  For the positions, differentiating
+``Phi(q*(u, p), u, p) = 0`` gives
 
     Phi_q dq + Phi_u du + Phi_p dp = 0   =>   dq = -Phi_q^{-1} (Phi_u du + Phi_p dp).
 
@@ -14,45 +16,111 @@ order follow.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
 
-from ._linalg import solve_blocks, where
+from .linalg import solve_blocks, solve_small, where
 from .mechanism import Mechanism
 from .structure import blocks
 
-__all__ = ["implicit_root", "root_derivatives", "attach_derivatives"]
+__all__ = ["implicit_solution", "mechanism_residual", "implicit_root", "root_derivatives", "attach_derivatives"]
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _safe(ok, tree, fill):
+    """``tree`` where ``ok``, else ``fill`` (``zeros_like``/``ones_like``), for its floating
+    leaves; other leaves (flags, counts) pass unchanged."""
+    def one(x):
+        x = jnp.asarray(x)
+        return where(ok, x, fill(x)) if jnp.issubdtype(x.dtype, jnp.inexact) else x
+    return jax.tree_util.tree_map(one, tree)
+
+
+def _safe_tangent(ok, tree):
+    """Tangents zeroed where not ``ok`` (``float0`` tangents of integer leaves unchanged)."""
+    def one(x):
+        return x if x.dtype == jax.dtypes.float0 else where(ok, x, jnp.zeros_like(x))
+    return jax.tree_util.tree_map(one, tree)
+
+
+def implicit_solution(residual: Callable, x_star, ok, args, structure=None, *, checkpoint: bool = False):
+    """Attach a root ``x*`` of ``residual(x, args) = 0`` to ``args`` for differentiation
+    (the identity on values): the one implicit-function rule of the package.
+
+    Differentiating ``F(x*(a), a) = 0`` gives ``F_x dx + F_a da = 0``, so the tangent is
+
+        dx = -F_x^{-1} F_a da,
+
+    evaluated in JAX primitives at the attached root (itself differentiable again), so
+    forward mode, reverse mode (by transposition of the linear solve) and every higher
+    order follow, and no derivative goes through the iterations that found ``x*``.
+
+    **Arguments**
+
+    - `residual`: ``fn(x, args) -> F`` with ``F`` of the shape of ``x`` (a static function:
+      give a module-level function or a ``functools.partial`` of one, not a closure over
+      arrays, which would receive no derivative).
+    - `x_star`: the converged root (any shape; the system is its flattening).
+    - `ok`: boolean scalar, False where the solve failed: there the tangent is exactly
+      zero, and the rule is evaluated at a harmless point (``x = 0``, floating ``args``
+      leaves ``= 1``), so a failed sample never puts NaN into a batch gradient (a NaN there
+      would leak through ``0 * NaN`` in the transposed, reverse-mode, computation).
+    - `args`: a pytree of what ``x*`` depends on; non-floating leaves get no derivative.
+    - `structure`: the block-triangular order of ``F_x`` (``structure.blocks``) when one is
+      known: one small solve per diagonal block; ``None``: one dense small solve.
+    - `checkpoint`: call the rule under ``jax.checkpoint``: needed inside a ``lax.scan``
+      that is differentiated twice with reverse mode first (forward dynamics' steps):
+      without it jax 0.10.2 gave half the second derivative there (forward or reverse
+      over reverse), ``jax.lax.custom_root`` alike (``tests/test_hinge.py``).  Off by
+      default: it made the reverse-mode programs of the position solve ~1.5x longer to
+      compile (flap_msd's gradient test, 37 s to 58 s).
+
+    **Returns** ``x_star``, with the derivative above.
+    """
+    if not checkpoint:
+        return _attach(residual, x_star, ok, args, structure)
+    attach = lambda x_, ok_, a_: _attach(residual, x_, ok_, a_, structure)  # noqa: E731
+    return jax.checkpoint(attach, prevent_cse=False)(x_star, ok, args)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 4))
+def _attach(residual, x_star, ok, args, structure):
+    """``x_star`` attached to ``args`` (``implicit_solution``'s custom JVP)."""
+    return x_star
+
+
+@_attach.defjvp
+def _implicit_solution_jvp(residual, structure, primals, tangents):
+    x_star, ok, args = primals
+    _, _, dargs = tangents
+    x = _attach(residual, x_star, ok, args, structure)  # differentiable again: second order follows
+    x_s = _safe(ok, x, jnp.zeros_like)
+    args_s = _safe(ok, args, jnp.ones_like)
+    _, rhs = jax.jvp(lambda a: residual(x_s, a), (args_s,), (_safe_tangent(ok, dargs),))
+    k = x.size
+    jac = jax.jacfwd(lambda x_: residual(x_, args_s))(x_s).reshape(k, k)
+    jac = where(ok, jac, jnp.eye(k, dtype=jac.dtype))
+    rhs = rhs.reshape(k)
+    dx = -(solve_small(jac, rhs) if structure is None else solve_blocks(jac, rhs, structure))
+    return x, where(ok, dx.reshape(x.shape), jnp.zeros_like(x))
+
+
+def mechanism_residual(mech: Mechanism, q, args):
+    """``Phi(q, u, p)`` of ``mech`` with ``args = (u, p)``: the residual ``implicit_root``
+    attaches."""
+    u, p = args
+    return mech.residual(q, u, p)
+
+
 def implicit_root(mech: Mechanism, q_star, ok, u, p):
-    """Attach a converged root ``q*`` to ``(u, p)`` for differentiation (identity on values).
+    """Attach a converged root ``q*`` to ``(u, p)`` for differentiation (identity on values):
+    ``implicit_solution`` of the loop-closure residual, solved block by block.
 
     Tangent: ``dq = -Phi_q^{-1} (Phi_u du + Phi_p dp)`` (implicit function theorem).  Where
-    ``ok`` is False the tangent is exactly zero and every intermediate is finite, so a
-    failed sample never puts NaN into a batch gradient.
+    ``ok`` is False the tangent is exactly zero and every intermediate is finite.
     """
-    return q_star
-
-
-@implicit_root.defjvp
-def _implicit_root_jvp(mech, primals, tangents):
-    q_star, ok, u, p = primals
-    _, _, du, dp = tangents
-    q = implicit_root(mech, q_star, ok, u, p)  # differentiable again: second order follows
-    # Evaluate the rule at a safe point where the sample failed (its NaNs would leak through
-    # 0 * NaN in the transposed, reverse-mode, computation).
-    q_s = where(ok, q, jnp.zeros_like(q))
-    u_s = where(ok, u, jnp.zeros_like(u))
-    p_s = jax.tree_util.tree_map(lambda x: where(ok, x, jnp.ones_like(x)), p)
-    du = where(ok, du, jnp.zeros_like(du))
-    dp = jax.tree_util.tree_map(lambda x: where(ok, x, jnp.zeros_like(x)), dp)
-    _, rhs = jax.jvp(lambda u_, p_: mech.residual(q_s, u_, p_), (u_s, p_s), (du, dp))
-    jac = jax.jacfwd(mech.residual)(q_s, u_s, p_s)
-    jac = where(ok, jac, jnp.eye(mech.m, dtype=jac.dtype))
-    dq = -solve_blocks(jac, rhs, blocks(mech))
-    return q, where(ok, dq, jnp.zeros_like(dq))
+    return implicit_solution(functools.partial(mechanism_residual, mech), q_star, ok, (u, p), blocks(mech))
 
 
 def root_derivatives(mech: Mechanism, q, u, p, ok):

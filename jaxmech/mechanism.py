@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._xla import unfused
+from .xla import unfused
 
 __all__ = ["Mechanism", "cis", "Vars"]
 
@@ -149,8 +149,11 @@ class Mechanism:
       must give exactly ``m`` real equations.  ``None`` (or ``[]``) when there are no
       dependent coordinates: a mechanism of inputs only (a hinged flap, a rotating disc)
       is solved trivially and its dynamics and statics work like any other's.
-    - `lengths`: names (of coords, inputs or params) measured in metres.  Defaults to
-      every parameter.  Their magnitude sets the residual scale.
+    - `lengths`: names (of coords, inputs or params) measured in metres; required when
+      the mechanism has parameters (``()`` when none is a length), so that a mass, an
+      angle or ``g`` never enters the length scale by default.  The largest length
+      parameter sets the residual scale, and length parameters must be positive (unless
+      `signed`); other parameters (angles, masses, coefficients) may take any finite value.
     - `signed`: length parameters that may be zero or negative (offsets).  Every other
       length parameter must be positive and finite.
     - `points`: optional ``{name: fn(q, u, p) -> complex}`` points of interest (m).
@@ -184,7 +187,11 @@ class Mechanism:
         every = self.coords + self.inputs + self.params
         if len(set(every)) != len(every):
             raise ValueError("coords, inputs and params must not share a name")
-        lengths = self.params if self.lengths is None else _names(self.lengths, "lengths")
+        if self.lengths is None and self.params:
+            raise ValueError(
+                f"{self.name}: say which parameters are lengths: lengths=(names in metres, of params, coords or "
+                f"inputs; () if none); the parameters are {list(self.params)}")
+        lengths = () if self.lengths is None else _names(self.lengths, "lengths")
         for n in lengths:
             if n not in every:
                 raise ValueError(f"lengths: {n!r} is not a coordinate, input or parameter")

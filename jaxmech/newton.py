@@ -8,7 +8,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ._linalg import cond1, small_max, small_norm, small_tmatmul, solve_blocks, solve_small, where
+from .linalg import cond1, small_max, small_norm, small_tmatmul, solve_blocks, solve_small, where
 from .mechanism import Mechanism
 from .options import SolverOptions, tolerances
 from .status import Status
@@ -112,6 +112,9 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     dtype = guess.dtype
     xtol, ftol, cond_max = tolerances(opts, dtype)
     tiny = float(jnp.finfo(dtype).tiny)
+    # LM's damping floor (scaled units): 4096 eps (9.1e-13 in float64) keeps a zero column
+    # of the scaled Jacobian from making the damped matrix singular.
+    floor = 4096.0 * float(jnp.finfo(dtype).eps)
     evaluate, s = evaluator(mech, u, p, dtype)
     m = mech.m
     eye = jnp.eye(m, dtype=dtype)
@@ -124,7 +127,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
         lm = mu > 0
         ata = small_tmatmul(a, a)
         eye_b = jnp.eye(a.shape[0], dtype=dtype)
-        return solve_small(where(lm, ata + mu * (ata * eye_b + 1e-12 * eye_b), a), where(lm, small_tmatmul(a, r), r))
+        return solve_small(where(lm, ata + mu * (ata * eye_b + floor * eye_b), a), where(lm, small_tmatmul(a, r), r))
 
     def step(r, js, mu):
         if len(order) == 1:

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import where
+from .linalg import where
 from .implicit import implicit_root
 from .inputs import batch_shape, prepare
 from .mechanism import Mechanism

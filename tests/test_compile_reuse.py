@@ -21,7 +21,7 @@ P = dict(a=1.0, b=3.0, c=2.5, d=3.5)
 
 def fourbar(c_scale=1.0):
     return jm.Mechanism(
-        coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+        coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"), lengths=("a", "b", "c", "d"),
         constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - c_scale * p.c * jm.cis(q.theta4) - p.d],
         branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
     )  # fmt: skip

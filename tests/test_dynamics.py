@@ -424,10 +424,11 @@ def test_inverse_dynamics_torque_reproduces_motion():
     drive = SmoothStart(u0=0.3, w=2.0, k=4.0)
     P = {**FB_P, "c2": 0.0}
 
-    def torque(t, q, u, ud, p):
+    def torque(q, u, p, v, t):
         # the prescribed motion's inverse-dynamics torque, at the drive's own state
         uu, uud, uudd = (jnp.reshape(x, (1,)) for x in _drive_derivs(drive, t))
-        qd = D.close_loop(FB, uu, p, q, 8)[0]
+        p = dict(p)
+        qd = D.close_loop(FB, uu, p, jnp.stack([q[n] for n in FB.coords]), 8)[0]
         return D.generalized_forces(FB_MODEL, qd, uu, uud, uudd, p, t)[0]
 
     tr = D.forward_dynamics(FB_MODEL, P, 0.3, 0.0, FB_GUESS, h=0.005, steps=300, load=torque)

@@ -127,3 +127,48 @@ def test_forward_dynamics_gradient_in_reverse_mode_against_the_closed_form():
             "c": swing * (-W / (2 * J_O)) * 2 * m * c}
     for name, value in want.items():
         assert abs(float(g[name]) - value) <= RTOL_FD_GRAD * abs(value), (name, float(g[name]), value)
+
+
+def test_one_implicit_rule_second_order_through_statics_and_forward_dynamics():
+    """``implicit.implicit_solution`` (the rule solve, statics and forward dynamics share)
+    against finite differences, second order, forward and reverse mode: the equilibrium
+    angle in the stiffness and the moment, and one step's final angle and rate in the
+    stiffness (the position solve: test_solve's check_grads)."""
+    from jax.test_util import check_grads
+
+    def theta_star(k, M0):
+        return D.equilibrium(MODEL, {**P, "k": k, "M0": M0}, (-1.0, 2.0), ()).u[0]
+
+    check_grads(theta_star, (P["k"], P["M0"]), order=2, modes=("fwd", "rev"))
+
+    def final(k):
+        tr = D.forward_dynamics(MODEL, {**P, "k": k}, 0.2, 0.0, (), h=0.05 / W, steps=1)
+        return jnp.stack([tr.u[-1, 0], tr.u_dot[-1, 0]])
+
+    check_grads(final, (P["k"],), order=2, modes=("fwd", "rev"))
+
+
+def test_implicit_rule_inside_a_scan_second_order_in_reverse_mode():
+    """The rule inside ``lax.scan`` (as forward dynamics' steps use it), reverse over
+    reverse and forward over reverse, against the closed form: one implicit Euler step
+    of ``x' = -k x`` from ``x = 1`` with ``h = 0.1`` solves ``z = -h k (1 + z)``, so
+    ``x1 = 1 / (1 + h k)`` and ``d2 x1/dk2 = 2 h^2 / (1 + h k)^3``.  (Without
+    ``checkpoint=True``, jax 0.10.2 gives half of it, as it does for
+    ``jax.lax.custom_root``.)"""
+    from jaxmech.implicit import implicit_solution
+
+    def euler_stage(z, args):
+        x, k = args
+        return z + 0.1 * k * (x + z)
+
+    def step(x, k):
+        z_star = jax.lax.stop_gradient(-0.1 * k * x / (1 + 0.1 * k))  # the solver's root
+        return x + implicit_solution(euler_stage, z_star, jnp.asarray(True), (x, k), checkpoint=True), None
+
+    def x1(k):
+        return jax.lax.scan(lambda x, _: step(x, k), jnp.ones(1), None, length=1)[0][0]
+
+    k = 2.0
+    exact = 2 * 0.1**2 / (1 + 0.1 * k) ** 3
+    for second in (jax.grad(jax.grad(x1)), jax.jacfwd(jax.grad(x1)), jax.grad(jax.jacfwd(x1))):
+        assert abs(float(second(k)) - exact) <= 1e-15

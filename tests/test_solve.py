@@ -300,17 +300,17 @@ def test_two_loop_sixbar_stroke_closes_and_derivatives():
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 6, 9])
 def test_small_solves_and_condition_numbers_match_numpy(n):
     """The unrolled (n <= 4) and looped (n > 4) eliminations against LAPACK via numpy."""
-    from jaxmech._linalg import cond1 as _cond1, solve_small as _solve_small
+    from jaxmech.linalg import cond1, solve_small
 
     rng = _rng(n)
     a = rng.normal(size=(n, n)) + 0.5 * n * np.eye(n)
     a[[0, -1]] = a[[-1, 0]]  # the largest entries off the diagonal: pivoting is exercised
     b, bb = rng.normal(size=n), rng.normal(size=(n, 3))
-    np.testing.assert_allclose(np.asarray(_solve_small(jnp.asarray(a), jnp.asarray(b))), np.linalg.solve(a, b), rtol=1e-12, atol=1e-13)
-    np.testing.assert_allclose(np.asarray(_solve_small(jnp.asarray(a), jnp.asarray(bb))), np.linalg.solve(a, bb), rtol=1e-12, atol=1e-13)
-    np.testing.assert_allclose(float(_cond1(jnp.asarray(a))), np.linalg.cond(a, 1), rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(solve_small(jnp.asarray(a), jnp.asarray(b))), np.linalg.solve(a, b), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(solve_small(jnp.asarray(a), jnp.asarray(bb))), np.linalg.solve(a, bb), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(float(cond1(jnp.asarray(a))), np.linalg.cond(a, 1), rtol=1e-10)
     if n in (3, 6):  # the unrolled and the looped elimination, both differentiated
-        check_grads(lambda a_, b_: _solve_small(a_, b_), (jnp.asarray(a), jnp.asarray(b)), order=1, modes=("fwd", "rev"))
+        check_grads(lambda a_, b_: solve_small(a_, b_), (jnp.asarray(a), jnp.asarray(b)), order=1, modes=("fwd", "rev"))
 
 
 def _toggle_stroke():
@@ -370,15 +370,15 @@ def test_predictor_drops_terms_its_series_cannot_be_trusted_with():
     """Near a singular position q'' is huge: the second-order term must then be dropped, and
     a predicted step above max_step dropped altogether (a flap design starting near a toggle
     was predicted 2000 rad away and converged 319 turns off before this guard)."""
-    from jaxmech.continuation import predict as _predict
+    from jaxmech.continuation import predict
 
     q, s = jnp.array([0.3, 1.0]), jnp.array([1.0, 1.0])
     d1 = jnp.array([[1.0], [-0.5]])
     smooth = jnp.array([[[0.4]], [[0.2]]])
     du = jnp.array([0.01])
     exact2 = q + d1 @ du + 0.5 * smooth[:, :, 0] @ du**2
-    np.testing.assert_allclose(np.asarray(_predict(q, d1, smooth, du, s, 1.0)), np.asarray(exact2), rtol=1e-15)
+    np.testing.assert_allclose(np.asarray(predict(q, d1, smooth, du, s, 1.0)), np.asarray(exact2), rtol=1e-15)
     wild = 1e8 * smooth  # second-order term 100x the first: first order only
-    np.testing.assert_allclose(np.asarray(_predict(q, d1, wild, du, s, 1.0)), np.asarray(q + d1 @ du), rtol=1e-15)
+    np.testing.assert_allclose(np.asarray(predict(q, d1, wild, du, s, 1.0)), np.asarray(q + d1 @ du), rtol=1e-15)
     fast = 1e3 * d1  # a 10 rad first-order step: no prediction at all
-    np.testing.assert_array_equal(np.asarray(_predict(q, fast, smooth, du, s, 1.0)), np.asarray(q))
+    np.testing.assert_array_equal(np.asarray(predict(q, fast, smooth, du, s, 1.0)), np.asarray(q))

@@ -9,7 +9,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from jax.test_util import check_grads  # noqa: E402
 
-from jaxmech._linalg import cond1, solve_blocks  # noqa: E402
+from jaxmech.linalg import cond1, solve_blocks  # noqa: E402
 from jaxmech.scenes import get_scene  # noqa: E402
 from jaxmech.structure import blocks, sparsity  # noqa: E402
 

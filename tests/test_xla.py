@@ -1,4 +1,4 @@
-"""The CPU fusion workaround (jaxmech._xla.unfused) does what it is there for: fewer sine
+"""The CPU fusion workaround (jaxmech.xla.unfused) does what it is there for: fewer sine
 evaluations in the compiled residual-and-Jacobian program, the same values."""
 
 import jax
@@ -10,7 +10,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
-import jaxmech._xla as xla  # noqa: E402
+import jaxmech.xla as xla  # noqa: E402
 
 
 def _program(mech, p):
@@ -29,7 +29,7 @@ def _program(mech, p):
 def test_unfused_saves_sines_on_cpu(monkeypatch):
     def mech():  # a fresh mechanism each time: the trace must be taken anew
         return jm.Mechanism(
-            coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+            coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"), lengths=("a", "b", "c", "d"),
             constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d],
             name=f"fourbar{np.random.randint(1 << 30)}",
         )  # fmt: skip

@@ -6,7 +6,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .._linalg import cond1, solve_small
+from ..linalg import cond1, solve_small
 from ..mechanism import Mechanism
 from ..implicit import implicit_root
 from ..newton import on_branch
@@ -15,19 +15,20 @@ from ..options import SolverOptions, tolerances
 __all__ = ["close_loop"]
 
 
-def close_loop(mech: Mechanism, u, p, qg, iters: int):
+def close_loop(mech: Mechanism, u, p, qg, iters: int, options: SolverOptions = SolverOptions()):
     """Close the loop near ``qg`` by ``iters`` plain Newton steps (a step's guess is within
     a step of the root; a fixed count keeps every batch member in step), then
     attach the root to ``(u, p)`` (implicit derivatives).  ``ok`` is False for a residual
     above tolerance, a singular Jacobian (toggle) or a change of assembly branch.
 
     **Arguments**: `u` ``(dof,)``; `p` parameters (a mapping; the mechanism's are read);
-    `qg` ``(m,)`` coordinates near the root (the last step's); `iters` (static).
+    `qg` ``(m,)`` coordinates near the root (the last step's); `iters` (static);
+    `options`: the caller's ``SolverOptions`` (its ``ftol`` and ``cond_max`` judge the root).
 
     **Returns** ``(q, ok)``: ``q (m,)`` differentiable in `u` and `p` (NaN where not ok)."""
     stop = jax.lax.stop_gradient
     us, ps = stop(u), jax.tree_util.tree_map(stop, p)
-    _, ftol, cond_max = tolerances(SolverOptions(), qg.dtype)
+    _, ftol, cond_max = tolerances(options, qg.dtype)
     def newton_step(_, q):
         return q - solve_small(jax.jacfwd(mech.residual)(q, us, ps), mech.residual(q, us, ps))
 

@@ -17,8 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._linalg import solve_small
+from ..linalg import solve_small
 from ..actuators import DCMotor, parameter_names
+from ..implicit import implicit_root, implicit_solution
+from ..mechanism import Vars
 from ..inputs import as_coords, as_inputs
 from ..options import SolverOptions
 from ..positions import solve
@@ -28,7 +30,7 @@ from .model import Model, mechanism_params, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
 
-__all__ = ["METHODS", "Trajectory", "Integrator", "rhs", "integrate", "forward_dynamics"]
+__all__ = ["METHODS", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "integrate", "forward_dynamics"]
 
 
 def _tableau(name):
@@ -89,12 +91,15 @@ class Integrator:
     program's identity; numbers that change between runs are arguments of ``integrate``).
 
     - `model`: the ``Model``; `method`: one of ``METHODS``; `steps`: number of steps.
-    - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``, or None.
+    - `load`: extra generalized force at the inputs, ``fn(q, u, p, v, t) -> (dof,)`` (the
+      convention of ``Moment`` and ``PointForce``), or None.
     - `actuators`: ``((input index, actuator), ...)``, each a ``StatefulActuator``
       (``jaxmech.actuators``: a ``DCMotor`` with its voltage, an ``OilCylinder``...); their
       states follow ``(u, u_dot)`` in the state vector, in this order.
     - `close_iters`: Newton steps that close the loop at each stage (``close_loop``).
-    - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment) and budget.
+    - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment; ``None``:
+      ``newton_tolerance`` of the dtype) and budget.
+    - `options`: the user's ``SolverOptions`` (the loop closures' ``ftol`` and ``cond_max``).
     """
 
     model: Model
@@ -103,8 +108,16 @@ class Integrator:
     load: Callable | None = None
     actuators: tuple = ()
     close_iters: int = 5
-    newton_tol: float = 1e-12
+    newton_tol: float | None = None
     newton_max: int = 12
+    options: SolverOptions = SolverOptions()
+
+
+def newton_tolerance(dtype) -> float:
+    """Default stage-Newton tolerance on the scaled increment: ``4096 eps`` of ``dtype``
+    (9.1e-13 in float64): the stages then hold their converged digits to a few thousand
+    round-off units, well below the method's truncation error at any usable step."""
+    return 4096.0 * float(jnp.finfo(dtype).eps)
 
 
 def rhs(integ: Integrator, p, t, y, qg):
@@ -115,14 +128,18 @@ def rhs(integ: Integrator, p, t, y, qg):
     mech = model.mechanism
     dof = mech.dof
     u, ud = y[:dof], y[dof : 2 * dof]
-    q, ok = close_loop(mech, u, p, qg, iters)
+    q, ok = close_loop(mech, u, p, qg, iters, integ.options)
     M = mass_matrix(model, q, u, p)
     # h(u, u_dot, t): the inverse-dynamics force at zero input acceleration
     # (for one input: (1/2) M'(u) u_dot^2 - Q(u, u_dot, t)).
     hvec, _ = generalized_forces(model, q, u, ud, jnp.zeros_like(ud), p, t)
     tau = jnp.zeros_like(u)
     if load is not None:
-        tau = tau + jnp.reshape(load(t, q, u, ud, p), (dof,))
+        # The convention of every load: fn(q, u, p, v, t) with names (Moment, PointForce),
+        # v the coordinates' and inputs' rates (q_dot = dq/du u_dot, implicit).
+        _, qd = jax.jvp(lambda u_: implicit_root(mech, jax.lax.stop_gradient(q), ok, u_, p), (u,), (ud,))
+        v = Vars({**{n: qd[i] for i, n in enumerate(mech.coords)}, **{n: ud[i] for i, n in enumerate(mech.inputs)}})
+        tau = tau + jnp.reshape(load(mech.vars_q(q), mech.vars_u(u), Vars(p), v, t), (dof,))
     # Each actuator: its force on its input, and the rates of its own states (StatefulActuator).
     rates, at = [], 2 * dof
     for k_in, act in integ.actuators:
@@ -135,35 +152,12 @@ def rhs(integ: Integrator, p, t, y, qg):
     return jnp.where(ok, f, jnp.nan)
 
 
-def _stage_residual(integ, A, c, Z, args):
-    """Stage equations ``G(Z) = Z - h A F(y + Z)`` (``Z_i = Y_i - y_n``)."""
+def stage_residual(integ: Integrator, A, c, Z, args):
+    """Stage equations ``G(Z, args) = Z - h A F(y + Z)`` (``Z_i = Y_i - y_n``) of the
+    tableau ``(A, c)`` (numpy arrays), ``args = (y, qg, p, t, h)``."""
     y, qg, p, t, h = args
     F = jax.vmap(lambda ci, zi: rhs(integ, p, t + ci * h, y + zi, qg))(c, Z)
     return Z - h * (jnp.asarray(A, Z.dtype) @ F)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _attach_stages(G, Z_star, args):
-    """Identity on the converged stages ``Z*``; tangent ``dZ = -G_Z^{-1} G_args dargs``
-    (implicit function theorem on ``G(Z*, args) = 0``).  Written as a custom JVP rather than
-    ``jax.lax.custom_root``, which traces the linearization of ``G`` (third derivatives of
-    the positions) on every call, differentiated or not."""
-    return Z_star
-
-
-@_attach_stages.defjvp
-def _attach_stages_jvp(G, primals, tangents):
-    Z_star, args = primals
-    _, dargs = tangents
-    Z = _attach_stages(G, Z_star, args)
-    ok = jnp.all(jnp.isfinite(Z))
-    Zs = jnp.where(ok, Z, jnp.zeros_like(Z))
-    k = Z.size
-    jz = jax.jacfwd(lambda z: G(z, args))(Zs).reshape(k, k)
-    jz = jnp.where(ok & jnp.all(jnp.isfinite(jz)), jz, jnp.eye(k, dtype=jz.dtype))
-    _, g_args = jax.jvp(lambda a: G(Zs, a), (args,), (dargs,))
-    dZ = -jnp.linalg.solve(jz, g_args.reshape(-1)).reshape(Z.shape)
-    return Z, jnp.where(ok, dZ, jnp.zeros_like(dZ))
 
 
 def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
@@ -175,7 +169,8 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
     **Returns** ``(ys (steps+1, n), qs (steps+1, m), status, t_stop, newton (steps,))``.
     """
     model, method, steps, iters = integ.model, integ.method, integ.steps, integ.close_iters
-    newton_tol, newton_max = integ.newton_tol, integ.newton_max
+    newton_max = integ.newton_max
+    newton_tol = newton_tolerance(y0.dtype) if integ.newton_tol is None else integ.newton_tol
     mech = model.mechanism
     dof = mech.dof
     A_np, c_np, d_np = _tableau(method)
@@ -224,10 +219,15 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
             return Z, it, err
 
         Z_star, it, err = newton(jnp.zeros((s, n), y.dtype))
-        G = functools.partial(_stage_residual, integ, A_np, c_np)
-        Z = _attach_stages(G, stop(Z_star), (y, qg, p, t, h))
+        # The converged stages attached to their arguments by the implicit rule on
+        # G(Z*, args) = 0: dZ = -G_Z^{-1} G_args dargs (a custom JVP rather than
+        # jax.lax.custom_root, which traces the linearization of G, third derivatives of the
+        # positions, on every call, differentiated or not).
+        G = functools.partial(stage_residual, integ, A_np, c_np)
+        Z_star = stop(Z_star)
+        Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, p, t, h), checkpoint=True)
         y_new = y + d @ Z
-        q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters)
+        q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters, integ.options)
         conv = (err >= 0) & (err <= 1e3 * newton_tol)
         finite = jnp.all(jnp.isfinite(y_new))
         out_of_stroke = jnp.any(y_new[:dof] < lo) | jnp.any(y_new[:dof] > hi)
@@ -245,7 +245,11 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
         return (y_next, q_next, status_next, t_stop), (jnp.where(accept, y_new, jnp.nan), jnp.where(accept, q_new, jnp.nan), it)
 
     init = (y0, q0, jnp.asarray(DynStatus.OK, jnp.int32), t0)
-    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(step, init, jnp.arange(steps, dtype=y0.dtype))
+    # The step under jax.checkpoint: without it, reverse mode differentiated again (forward
+    # or reverse over reverse) lost half of second derivatives through the scan on jax
+    # 0.10.2 (tests/test_hinge.py); reverse mode recomputes a step instead of storing it.
+    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(jax.checkpoint(step, prevent_cse=False), init,
+                                                         jnp.arange(steps, dtype=y0.dtype))
     return jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its
 
 
@@ -255,14 +259,14 @@ _integrate_jit = jax.jit(integrate, static_argnums=0)
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
                      motor: DCMotor | None = None, voltage=None, current0=0.0, motor_input: str | None = None,
                      actuators: Mapping | None = None, load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
-                     newton_tol: float = 1e-12, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
+                     newton_tol: float | None = None, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
     """Integrate the equations of motion in the inputs, with fixed steps (one design).
 
     ``M(u) u_ddot + h(u, u_dot, t) = tau_load + tau_motor`` where ``M`` is ``mass_matrix``
     and ``h`` the inverse-dynamics force at zero input acceleration (for one input
     ``h = (1/2) M'(u) u_dot^2 - Q``); with an inductive motor the state also holds the
     current, ``L di/dt = v - R i - n K w``.  Every stage closes the loop (a fixed number of
-    Newton steps from the step's start, attached to ``(u, p)`` by ``solve.implicit_root``),
+    Newton steps from the step's start, attached to ``(u, p)`` by ``implicit.implicit_root``),
     and the stage equations ``Z = h A F(y + Z)`` are solved by simplified Newton (one
     iteration matrix per step, from a finite-difference Jacobian) and attached to their
     arguments by a custom JVP (the implicit function theorem on the stage equations:
@@ -285,13 +289,17 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     - `actuators`: ``{input name: actuator}``, further ``StatefulActuator``s (an
       ``OilCylinder``...), each on its input, with states of their own started at their
       ``initial_state(p)``; their parameters join `p` like the motor's.
-    - `load`: extra generalized force at the inputs, ``fn(t, q, u, u_dot, p) -> (dof,)``
-      (arrays; ``p`` a dict), e.g. a controller or a prescribed torque.
+    - `load`: extra generalized force at the inputs (N m or N), ``fn(q, u, p, v, t) ->
+      (dof,)``, the convention of every load (``Moment``, ``PointForce``): `q`, `u`, `p`
+      and the rates `v` (coordinates' and inputs', ``v.theta2``) by name, `t` in s; e.g. a
+      controller or a prescribed torque (``dict(p)`` gives the mapping the library's
+      functions take).
     - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
-    - `newton_tol`: stage-Newton tolerance on the scaled increment; `newton_max`: its budget.
+    - `newton_tol`: stage-Newton tolerance on the scaled increment (default
+      ``newton_tolerance(dtype)``: ``4096 eps``); `newton_max`: its budget.
     - `close_iters`: Newton steps that close the loop at each stage from the step's start
       (the step must be small enough for them to converge; a failure is reported).
-    - `options`: settings of the initial position solve.
+    - `options`: ``SolverOptions`` of the initial position solve and of every loop closure.
 
     **Returns** a ``Trajectory``.  A run that reaches a singular or unassemblable position,
     a failed step or the stroke end stops there with its ``DynStatus``; later rows are NaN.
@@ -337,7 +345,8 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
         hi = jnp.full((mech.dof,), jnp.inf, dtype)
     else:
         lo, hi = (jnp.broadcast_to(jnp.asarray(b, dtype), (mech.dof,)) for b in stroke)
-    integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters), float(newton_tol), int(newton_max))
+    integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters),
+                       None if newton_tol is None else float(newton_tol), int(newton_max), options)
     ys, qs, status, t_stop, its = _integrate_jit(integ, pj, jnp.asarray(t0, dtype), jnp.asarray(h, dtype), y0, sol.q, lo, hi)
     status = jnp.where(sol.status == Status.CONVERGED, status, DynStatus.POSITION).astype(jnp.int32)
     dof = mech.dof

@@ -16,9 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._linalg import solve_small
+from ..linalg import solve_small
 from ..actuators import Spec, resolve, spec_names
-from ..implicit import implicit_root
+from ..implicit import implicit_root, implicit_solution
 from ..inputs import as_coords, as_inputs
 from ..options import SolverOptions
 from ..positions import solve_one
@@ -28,7 +28,7 @@ from .model import Model, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces
 
-__all__ = ["Equilibrium", "equilibrium"]
+__all__ = ["Equilibrium", "equilibrium", "static_residual"]
 
 
 @jax.tree_util.register_dataclass
@@ -58,37 +58,15 @@ class Equilibrium:
         return jnp.all(jnp.linalg.eigvalsh(0.5 * (self.stiffness + jnp.swapaxes(self.stiffness, -1, -2))) > 0, axis=-1)
 
 
-def _static_residual(model: Model, applied, q_star, ok, u, p, t):
-    """``R(u, p) = tau_quasi_static(u, p) - tau_applied(p)`` with ``q = q*(u, p)`` implicit."""
+def static_residual(model: Model, applied, u, args):
+    """``R(u, p) = tau_quasi_static(u, p) - tau_applied(p)`` with ``q = q*(u, p)`` implicit;
+    ``args = (q_star, ok, p, t)``: the positions solved at ``u`` (the implicit rule of the
+    positions ignores the tangent of ``q_star``), whether they converged, the parameters
+    and the time (s)."""
+    q_star, ok, p, t = args
     q = implicit_root(model.mechanism, q_star, ok, u, p)
     tau, _ = generalized_forces(model, q, u, jnp.zeros_like(u), jnp.zeros_like(u), p, t, inertia=False)
     return tau - jnp.broadcast_to(jnp.asarray(resolve(applied, p), tau.dtype), tau.shape)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _attach_equilibrium(model, applied, u_star, q_star, ok, p, t):
-    """Identity on ``u*``; tangent ``du = -R_u^{-1} (R_p dp + R_t dt)`` (implicit function
-    theorem on ``R(u*(p), p) = 0``), zero where the solve failed."""
-    return u_star
-
-
-@_attach_equilibrium.defjvp
-def _attach_equilibrium_jvp(model, applied, primals, tangents):
-    u_star, q_star, ok, p, t = primals
-    _, _, _, dp, dt = tangents
-    u = _attach_equilibrium(model, applied, u_star, q_star, ok, p, t)
-    # Evaluate the rule at a harmless point where the solve failed (0 * NaN leaks in reverse mode).
-    u_s = jnp.where(ok, u, jnp.zeros_like(u))
-    q_s = jnp.where(ok, q_star, jnp.zeros_like(q_star))
-    p_s = jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.ones_like(x)), p)
-    dp = jax.tree_util.tree_map(lambda x: jnp.where(ok, x, jnp.zeros_like(x)), dp)
-    dt = jnp.where(ok, dt, jnp.zeros_like(dt))
-    res = lambda u_, p_, t_: _static_residual(model, applied, q_s, ok, u_, p_, t_)  # noqa: E731
-    _, rhs = jax.jvp(lambda p_, t_: res(u_s, p_, t_), (p_s, t), (dp, dt))
-    ju = jax.jacfwd(res)(u_s, p_s, t)
-    ju = jnp.where(ok, ju, jnp.eye(u.shape[0], dtype=ju.dtype))
-    du = -solve_small(ju, rhs)
-    return u, jnp.where(ok, du, jnp.zeros_like(du))
 
 
 def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: int, lo, hi, u0, guess, p, t):
@@ -102,7 +80,7 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
     def evaluate(u, qg):
         sol = solve_one(mech, u, ps, qg, options)
         ok = sol.status == Status.CONVERGED
-        f = lambda u_: _static_residual(model, applied, sol.q, ok, u_, ps, ts)  # noqa: E731
+        f = lambda u_: static_residual(model, applied, u_, (sol.q, ok, ps, ts))  # noqa: E731
         r, j = jax.jvp(f, (u,), (jnp.ones_like(u),)) if mech.dof == 1 else (f(u), None)
         j = j[:, None] if mech.dof == 1 else jax.jacfwd(f)(u)
         return sol.q, r, j, ok
@@ -168,10 +146,12 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
         status = jnp.where((status == DynStatus.NOT_CONVERGED) & ~in_box, DynStatus.NO_EQUILIBRIUM, status)
     good = status == DynStatus.OK
     u_star = jnp.where(good, stop(u), jnp.nan)
-    u_eq = _attach_equilibrium(model, applied, u_star, jnp.where(good, q, jnp.nan), good, p, t)
+    # u* attached to (p, t) by the implicit rule on R(u*(p, t), p, t) = 0: du = -R_u^{-1} R_p dp.
+    u_eq = implicit_solution(functools.partial(static_residual, model, applied), u_star, good,
+                             (jnp.where(good, q, jnp.nan), good, p, t))
     # Close the loop at the final input (a few Newton steps from the last iterate's q, which is
     # within one quadratically small step) and attach it to (u_eq, p).
-    q_eq, q_ok = close_loop(mech, u_eq, p, jnp.where(good, q, guess), 3)
+    q_eq, q_ok = close_loop(mech, u_eq, p, jnp.where(good, q, guess), 3, options)
     good = good & q_ok
     status = jnp.where((status == DynStatus.OK) & ~q_ok, DynStatus.POSITION, status)
     # The stiffness is the last iterate's Jacobian (one Newton step away: a diagnostic).

@@ -28,7 +28,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .._linalg import solve_small
+from ..linalg import solve_small
 from ..actuators import resolve
 from ..kinematics import time_derivatives
 from ..mechanism import Vars

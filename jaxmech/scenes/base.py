@@ -14,6 +14,7 @@ from ..kinematics import ConstantSpeed, Motion, motion
 from ..mechanism import Mechanism
 from ..status import Status, status_counts
 from ..units import for_reading
+from .columns import table_columns
 
 __all__ = ["Scene", "SceneResult", "run_scene"]
 
@@ -125,22 +126,10 @@ class SceneResult:
         return self.scene.mechanism.inputs[0]
 
     def table(self) -> dict[str, np.ndarray]:
-        """Columns ``NAME[UNIT]`` (SI): input, every coordinate with ``_dot``/``_ddot``, outputs."""
-        sc, mo = self.scene, self.motion
-        cols: dict[str, np.ndarray] = {"t[s]": np.asarray(mo.t)}
-        uname = self.input_name
-        uu = sc.units[uname]
-        cols[f"{uname}[{uu}]"] = np.asarray(mo.u[:, 0])
-        cols[f"{uname}_dot[{uu}/s]"] = np.asarray(mo.u_dot[:, 0])
-        cols[f"{uname}_ddot[{uu}/s^2]"] = np.asarray(mo.u_ddot[:, 0])
-        for i, n in enumerate(sc.mechanism.coords):
-            un = sc.units[n]
-            cols[f"{n}[{un}]"] = np.asarray(mo.q[:, i])
-            cols[f"{n}_dot[{un}/s]"] = np.asarray(mo.q_dot[:, i])
-            cols[f"{n}_ddot[{un}/s^2]"] = np.asarray(mo.q_ddot[:, i])
-        for n, (v, unit) in self.outputs.items():
-            cols[f"{n}[{unit}]"] = np.asarray(v)
-        cols["status[-]"] = np.asarray(mo.status)
+        """Columns ``NAME[UNIT]`` (SI): input, every coordinate with ``_dot``/``_ddot``, outputs
+        (``columns.table_columns``, as a sweep writes them), and ``status[-]``."""
+        cols = {k: np.asarray(v) for k, v in table_columns(self.scene, self.motion, self.outputs, xp=np).items()}
+        cols["status[-]"] = np.asarray(self.motion.status)
         return cols
 
     def summary(self) -> str:

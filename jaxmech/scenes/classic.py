@@ -19,6 +19,7 @@ fourbar_mechanism = Mechanism(
     coords=("theta3", "theta4"),
     inputs=("theta2",),
     params=("a", "b", "c", "d"),
+    lengths=("a", "b", "c", "d"),
     constraints=lambda q, u, p: [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d],
     points={
         "O2": lambda q, u, p: 0.0 * p.a + 0j,

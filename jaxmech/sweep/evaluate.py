@@ -16,6 +16,7 @@ import jax.numpy as jnp
 from ..continuation import stroke
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..scenes.base import Scene
+from ..scenes.columns import is_drive_column, mask_failed, table_columns
 from ..options import SolverOptions
 from ..status import Status
 
@@ -78,32 +79,6 @@ def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = Solv
     return mo, ok
 
 
-def table_columns(scene: Scene, mo: Motion, outputs: Mapping | None, xp=jnp) -> dict:
-    """Columns ``NAME[UNIT]`` of ``SceneResult.table`` (without status), unmasked; `xp` is
-    ``jax.numpy`` (traced) or ``numpy`` (outputs evaluated design by design)."""
-    cols = {"t[s]": mo.t}
-    uname = scene.mechanism.inputs[0]
-    uu = scene.units[uname]
-    cols[f"{uname}[{uu}]"] = mo.u[..., 0]
-    cols[f"{uname}_dot[{uu}/s]"] = mo.u_dot[..., 0]
-    cols[f"{uname}_ddot[{uu}/s^2]"] = mo.u_ddot[..., 0]
-    for i, n in enumerate(scene.mechanism.coords):
-        un = scene.units[n]
-        cols[f"{n}[{un}]"] = mo.q[..., i]
-        cols[f"{n}_dot[{un}/s]"] = mo.q_dot[..., i]
-        cols[f"{n}_ddot[{un}/s^2]"] = mo.q_ddot[..., i]
-    for n, (v, unit) in (outputs or {}).items():
-        cols[f"{n}[{unit}]"] = xp.broadcast_to(xp.asarray(v), mo.t.shape)
-    return cols
-
-
-def is_drive_column(scene: Scene, name: str) -> bool:
-    """Whether a column is defined at failed samples too (time and the input's drive)."""
-    return name == "t[s]" or name.split("[")[0] in {
-        f"{scene.mechanism.inputs[0]}{s}" for s in ("", "_dot", "_ddot")
-    }
-
-
 def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
     """One design's table columns, traceable: ``({NAME[UNIT]: (N,)}, status (N,))``.
 
@@ -115,12 +90,6 @@ def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = Sol
     p = {k: jnp.asarray(v, mo.q.dtype) for k, v in p.items()}
     outs = scene.outputs(p, mo) if scene.outputs is not None else None
     return table_columns(scene, mo, outs), mo.status
-
-
-def mask_failed(scene: Scene, cols: dict, status, xp=jnp) -> dict:
-    """``cols`` with NaN at the samples that did not converge (drive columns kept)."""
-    ok = status == Status.CONVERGED
-    return {k: v if is_drive_column(scene, k) else xp.where(ok, v, xp.nan) for k, v in cols.items()}
 
 
 def design_status(status, xp=jnp):
