@@ -23,7 +23,8 @@ The stored program is used only where it is exactly what the jitted function wou
 
 Where: ``jaxmech-exported/`` inside the compilation cache folder in use (see
 ``jaxmech.cache``); nothing is stored or read when that cache is off, and
-``JAXMECH_COMPILE_CACHE=0`` turns both off.  Within a process, a loaded program serves every
+``JAXMECH_COMPILE_CACHE=0`` turns both off (``JAXMECH_EXPORT_CACHE=0``: this one only, read
+at every call).  Within a process, a loaded program serves every
 later call with the same key (compiled once, like the jitted function it stands for).
 """
 
@@ -49,6 +50,7 @@ _STATS = {"loaded": 0, "exported": 0, "fallback": 0}
 # key -> the callable that serves it in this process (None: export failed, use the jit path)
 _PROGRAMS: dict[str, object] = {}
 _FOLDER = "jaxmech-exported"
+_OFF = {"0", "off", "false", "no"}
 # JAX flags that change what a traced program is
 _FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
 
@@ -59,9 +61,9 @@ def export_stats() -> dict[str, int]:
 
 
 def export_dir() -> Path | None:
-    """The folder of exported programs, or None when the compilation cache is off."""
+    """The folder of exported programs, or None when it or the compilation cache is off."""
     cache = compile_cache_dir()
-    if cache is None or switched_off():
+    if cache is None or switched_off() or os.environ.get("JAXMECH_EXPORT_CACHE", "1").strip().lower() in _OFF:
         return None
     return Path(cache) / _FOLDER
 
