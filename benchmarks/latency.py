@@ -16,7 +16,7 @@ case a second time, interleaved, with the jaxmech package of another checkout (`
 ``git worktree add DIR <commit>``), so before/after figures are taken side by side under the
 same load; the load average is recorded around every case.
 
-Run: ``python -m benchmarks.latency [--quick] [--cases a,b] [--baseline DIR]``; writes
+Run: ``python -m benchmarks.latency [--quick] [--cases a,b] [--baseline DIR] [--warm-repeats N]``; writes
 ``results/latency.json``.
 """
 
@@ -226,10 +226,23 @@ def _run(args: list[str], env: dict[str, str], timeout: float = 600, tree: Path 
     return time.perf_counter() - t0, proc.stdout + proc.stderr, proc.returncode
 
 
-def run_case(case: str, cache: Path, tree: Path | None = None) -> dict:
+def _labels(warm_repeats: int) -> list[str]:
+    return ["cold"] + [f"warm{i}" if i else "warm" for i in range(max(1, warm_repeats))]
+
+
+def _median_warm(out: dict, warm_repeats: int) -> dict:
+    """``warm``: the run of median process time among ``warm_repeats`` warm runs (all kept)."""
+    if warm_repeats > 1:
+        runs = sorted((out.pop(k) for k in _labels(warm_repeats)[1:]), key=lambda r: r["process_s"])
+        out["warm"] = runs[len(runs) // 2]
+        out["warm_process_s_all"] = [r["process_s"] for r in runs]
+    return out
+
+
+def run_case(case: str, cache: Path, tree: Path | None = None, warm_repeats: int = 1) -> dict:
     """One case, cold (empty ``cache``) then warm (the same ``cache``): the split per run."""
     out: dict = {"load_average_1min_before": os.getloadavg()[0]}
-    for label in ("cold", "warm"):
+    for label in _labels(warm_repeats):
         dump = Path(tempfile.mkdtemp(prefix="jaxmech-ir-")) if label == "cold" else None
         wall, text, rc = _run([sys.executable, "-c", _script(case)], _env(cache, dump, tree), tree=tree)
         row: dict = {"process_s": wall, "returncode": rc}
@@ -243,25 +256,25 @@ def run_case(case: str, cache: Path, tree: Path | None = None) -> dict:
             shutil.rmtree(dump, ignore_errors=True)
         out[label] = row
     out["load_average_1min_after"] = os.getloadavg()[0]
-    return out
+    return _median_warm(out, warm_repeats)
 
 
-def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path, tree: Path | None = None) -> dict:
+def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path, tree: Path | None = None, warm_repeats: int = 1) -> dict:
     out: dict = {"load_average_1min_before": os.getloadavg()[0]}
     exe = [sys.executable, "-m", "jaxmech.cli"]
-    for label in ("cold", "warm"):
+    for label in _labels(warm_repeats):
         wall, text, rc = _run(exe + argv + ["--out", str(out_dir / label)], _env(cache, None, tree), tree=tree)
         out[label] = {"process_s": wall, "returncode": rc, **({"error": text[-2000:]} if rc else {})}
     out["load_average_1min_after"] = os.getloadavg()[0]
-    return out
+    return _median_warm(out, warm_repeats)
 
 
-def _one(name: str, tmp: Path, tree: Path | None) -> dict:
+def _one(name: str, tmp: Path, tree: Path | None, warm_repeats: int) -> dict:
     tag = "baseline-" if tree is not None else ""
     cache = tmp / f"{tag}{name}"
     if name in CLI_CASES:
-        return run_cli(name, CLI_CASES[name], cache, tmp / f"{tag}{name}-out", tree)
-    return run_case(name, cache, tree)
+        return run_cli(name, CLI_CASES[name], cache, tmp / f"{tag}{name}-out", tree, warm_repeats)
+    return run_case(name, cache, tree, warm_repeats)
 
 
 def _line(name: str, c: dict) -> str:
@@ -274,7 +287,7 @@ def run_reference(script: str) -> dict:
     return {"process_s": wall, "returncode": rc, **({"error": text[-500:]} if rc else {})}
 
 
-def run(quick: bool = False, cases: list[str] | None = None, baseline: Path | None = None) -> dict:
+def run(quick: bool = False, cases: list[str] | None = None, baseline: Path | None = None, warm_repeats: int = 1) -> dict:
     names = cases or (["fourbar_stroke", "fourbar_rebuild_and_resize"] if quick else list(CASES) + list(CLI_CASES))
     result: dict = {"cases": {}, "reference": {}}
     result["reference"]["fsolve_fourbar"] = min((run_reference(FSOLVE_FOURBAR) for _ in range(3)), key=lambda r: r["process_s"])
@@ -291,9 +304,9 @@ def run(quick: bool = False, cases: list[str] | None = None, baseline: Path | No
     with tempfile.TemporaryDirectory(prefix="jaxmech-latency-") as tmp:
         for name in names:
             if baseline is not None:  # before, then after, back to back under the same load
-                b = result["baseline"]["cases"][name] = _one(name, Path(tmp), baseline)
+                b = result["baseline"]["cases"][name] = _one(name, Path(tmp), baseline, warm_repeats)
                 print(_line(name + " (baseline)", b), flush=True)
-            c = result["cases"][name] = _one(name, Path(tmp), None)
+            c = result["cases"][name] = _one(name, Path(tmp), None, warm_repeats)
             print(_line(name, c), flush=True)
             if baseline is not None:
                 result["after_over_baseline"][name] = {k: c[k]["process_s"] / b[k]["process_s"] for k in ("cold", "warm")}
@@ -311,9 +324,11 @@ def main(argv=None):
     parser = base_parser(__doc__.splitlines()[0])
     parser.add_argument("--cases", default=None, help="comma-separated case names (default: all)")
     parser.add_argument("--baseline", default=None, help="a checkout of another commit: run every case with its jaxmech too, interleaved")
+    parser.add_argument("--warm-repeats", type=int, default=1, help="warm runs per case; the median is reported (a shared machine is noisy)")
     args = parser.parse_args(argv)
     cases = args.cases.split(",") if args.cases else None
-    res = run(quick=args.quick, cases=cases, baseline=Path(args.baseline).resolve() if args.baseline else None)
+    baseline = Path(args.baseline).resolve() if args.baseline else None
+    res = run(quick=args.quick, cases=cases, baseline=baseline, warm_repeats=args.warm_repeats)
     path = write_result("latency", res, out_dir=args.out)
     print(json.dumps(res.get("ratios", {}), indent=1))
     print(f"wrote {path}")
