@@ -154,13 +154,12 @@ def _program(fn, static: tuple, args: tuple, key: str, folder: Path):
         pass
     try:
         exp = jax.export.export(fn)(*static, *args)
-        data = exp.serialize()
-    except Exception:
+    except Exception:  # not exportable: the jitted function serves this key in this process
         return None
     try:
-        _write(path, bytes(data))
+        _write(path, bytes(exp.serialize()))
         _STATS["exported"] += 1
-    except OSError:  # a read-only cache: this process still uses the program it exported
+    except Exception:  # no serializer (flatbuffers) or a read-only cache: used in this process only
         pass
     return jax.jit(exp.call)
 
