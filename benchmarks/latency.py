@@ -10,7 +10,13 @@ is recorded too.  Beside them, in the same run: the seeds' method for the four-b
 scipy ``fsolve`` loop with 2x2 solves for velocity and acceleration, as a new user would
 write it) and pylinkage's first call (when installed), each as a whole process.
 
-Run: ``python -m benchmarks.latency [--quick] [--cases a,b]``; writes
+The warm run of a case also counts the exported programs it loaded (``jaxmech.exported``:
+a new process calls the stored program without tracing it); ``--baseline DIR`` runs every
+case a second time, interleaved, with the jaxmech package of another checkout (``DIR``, e.g.
+``git worktree add DIR <commit>``), so before/after figures are taken side by side under the
+same load; the load average is recorded around every case.
+
+Run: ``python -m benchmarks.latency [--quick] [--cases a,b] [--baseline DIR] [--warm-repeats N]``; writes
 ``results/latency.json``.
 """
 
@@ -55,7 +61,12 @@ def mark(name, t0):
 """
 
 _EPILOGUE = """
-out = {"import_s": t_import, "job_s": time.perf_counter() - t_start - t_import, "marks": MARKS,
+try:
+    from jaxmech.exported import export_stats
+    EXPORTS = export_stats()
+except ImportError:  # a checkout from before the export cache (--baseline)
+    EXPORTS = None
+out = {"exported_programs": EXPORTS, "import_s": t_import, "job_s": time.perf_counter() - t_start - t_import, "marks": MARKS,
        "trace_s": EVENTS.get("/jax/core/compile/jaxpr_trace_duration", 0.0),
        "lower_s": EVENTS.get("/jax/core/compile/jaxpr_to_mlir_module_duration", 0.0),
        "xla_compile_s": EVENTS.get("/jax/core/compile/backend_compile_duration", 0.0),
@@ -193,8 +204,10 @@ def _hlo_sizes(dump_dir: Path) -> dict[str, int]:
     return sizes
 
 
-def _env(cache: Path | None, dump: Path | None) -> dict[str, str]:
+def _env(cache: Path | None, dump: Path | None, tree: Path | None = None) -> dict[str, str]:
     env = dict(os.environ)
+    if tree is not None:  # the jaxmech package of another checkout shadows this one
+        env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", str(ROOT))])
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     if cache is None:
         env["JAXMECH_COMPILE_CACHE"] = "0"
@@ -206,18 +219,32 @@ def _env(cache: Path | None, dump: Path | None) -> dict[str, str]:
     return env
 
 
-def _run(args: list[str], env: dict[str, str], timeout: float = 600) -> tuple[float, str, int]:
+def _run(args: list[str], env: dict[str, str], timeout: float = 600, tree: Path | None = None) -> tuple[float, str, int]:
+    # run in the tree whose package is measured: ``-c`` and ``-m`` put the working folder first on sys.path
     t0 = time.perf_counter()
-    proc = subprocess.run(args, env=env, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run(args, env=env, cwd=tree or ROOT, capture_output=True, text=True, timeout=timeout)
     return time.perf_counter() - t0, proc.stdout + proc.stderr, proc.returncode
 
 
-def run_case(case: str, cache: Path) -> dict:
+def _labels(warm_repeats: int) -> list[str]:
+    return ["cold"] + [f"warm{i}" if i else "warm" for i in range(max(1, warm_repeats))]
+
+
+def _median_warm(out: dict, warm_repeats: int) -> dict:
+    """``warm``: the run of median process time among ``warm_repeats`` warm runs (all kept)."""
+    if warm_repeats > 1:
+        runs = sorted((out.pop(k) for k in _labels(warm_repeats)[1:]), key=lambda r: r["process_s"])
+        out["warm"] = runs[len(runs) // 2]
+        out["warm_process_s_all"] = [r["process_s"] for r in runs]
+    return out
+
+
+def run_case(case: str, cache: Path, tree: Path | None = None, warm_repeats: int = 1) -> dict:
     """One case, cold (empty ``cache``) then warm (the same ``cache``): the split per run."""
-    out: dict = {}
-    for label in ("cold", "warm"):
+    out: dict = {"load_average_1min_before": os.getloadavg()[0]}
+    for label in _labels(warm_repeats):
         dump = Path(tempfile.mkdtemp(prefix="jaxmech-ir-")) if label == "cold" else None
-        wall, text, rc = _run([sys.executable, "-c", _script(case)], _env(cache, dump))
+        wall, text, rc = _run([sys.executable, "-c", _script(case)], _env(cache, dump, tree), tree=tree)
         row: dict = {"process_s": wall, "returncode": rc}
         for line in text.splitlines():
             if line.startswith("LATENCY_JSON "):
@@ -228,16 +255,31 @@ def run_case(case: str, cache: Path) -> dict:
             row["hlo_lines"] = _hlo_sizes(dump)
             shutil.rmtree(dump, ignore_errors=True)
         out[label] = row
-    return out
+    out["load_average_1min_after"] = os.getloadavg()[0]
+    return _median_warm(out, warm_repeats)
 
 
-def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path) -> dict:
-    out: dict = {}
+def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path, tree: Path | None = None, warm_repeats: int = 1) -> dict:
+    out: dict = {"load_average_1min_before": os.getloadavg()[0]}
     exe = [sys.executable, "-m", "jaxmech.cli"]
-    for label in ("cold", "warm"):
-        wall, text, rc = _run(exe + argv + ["--out", str(out_dir / label)], _env(cache, None))
+    for label in _labels(warm_repeats):
+        wall, text, rc = _run(exe + argv + ["--out", str(out_dir / label)], _env(cache, None, tree), tree=tree)
         out[label] = {"process_s": wall, "returncode": rc, **({"error": text[-2000:]} if rc else {})}
-    return out
+    out["load_average_1min_after"] = os.getloadavg()[0]
+    return _median_warm(out, warm_repeats)
+
+
+def _one(name: str, tmp: Path, tree: Path | None, warm_repeats: int) -> dict:
+    tag = "baseline-" if tree is not None else ""
+    cache = tmp / f"{tag}{name}"
+    if name in CLI_CASES:
+        return run_cli(name, CLI_CASES[name], cache, tmp / f"{tag}{name}-out", tree, warm_repeats)
+    return run_case(name, cache, tree, warm_repeats)
+
+
+def _line(name: str, c: dict) -> str:
+    return (f"{name:32s} cold {c['cold']['process_s']:6.2f} s   warm {c['warm']['process_s']:6.2f} s"
+            + ("" if c["cold"].get("returncode", 0) == 0 and c["warm"].get("returncode", 0) == 0 else "   FAILED"))
 
 
 def run_reference(script: str) -> dict:
@@ -245,7 +287,7 @@ def run_reference(script: str) -> dict:
     return {"process_s": wall, "returncode": rc, **({"error": text[-500:]} if rc else {})}
 
 
-def run(quick: bool = False, cases: list[str] | None = None) -> dict:
+def run(quick: bool = False, cases: list[str] | None = None, baseline: Path | None = None, warm_repeats: int = 1) -> dict:
     names = cases or (["fourbar_stroke", "fourbar_rebuild_and_resize"] if quick else list(CASES) + list(CLI_CASES))
     result: dict = {"cases": {}, "reference": {}}
     result["reference"]["fsolve_fourbar"] = min((run_reference(FSOLVE_FOURBAR) for _ in range(3)), key=lambda r: r["process_s"])
@@ -256,16 +298,18 @@ def run(quick: bool = False, cases: list[str] | None = None) -> dict:
         result["reference"]["pylinkage_fourbar"] = run_reference(PYLINKAGE_FOURBAR)
     except ImportError:
         result["reference"]["pylinkage_fourbar"] = {"skipped": "pylinkage not installed (pip install -e '.[bench]')"}
+    if baseline is not None:
+        result["baseline"] = {"tree": baseline.name, "cases": {}}
+        result["after_over_baseline"] = {}
     with tempfile.TemporaryDirectory(prefix="jaxmech-latency-") as tmp:
         for name in names:
-            cache = Path(tmp) / name
-            if name in CLI_CASES:
-                result["cases"][name] = run_cli(name, CLI_CASES[name], cache, Path(tmp) / f"{name}-out")
-            else:
-                result["cases"][name] = run_case(name, cache)
-            c = result["cases"][name]
-            print(f"{name:32s} cold {c['cold']['process_s']:6.2f} s   warm {c['warm']['process_s']:6.2f} s"
-                  + ("" if c["cold"].get("returncode", 0) == 0 else "   FAILED"), flush=True)
+            if baseline is not None:  # before, then after, back to back under the same load
+                b = result["baseline"]["cases"][name] = _one(name, Path(tmp), baseline, warm_repeats)
+                print(_line(name + " (baseline)", b), flush=True)
+            c = result["cases"][name] = _one(name, Path(tmp), None, warm_repeats)
+            print(_line(name, c), flush=True)
+            if baseline is not None:
+                result["after_over_baseline"][name] = {k: c[k]["process_s"] / b[k]["process_s"] for k in ("cold", "warm")}
     fs = result["reference"]["fsolve_fourbar"]["process_s"]
     fb = result["cases"].get("fourbar_stroke")
     if fb:
@@ -279,9 +323,12 @@ def run(quick: bool = False, cases: list[str] | None = None) -> dict:
 def main(argv=None):
     parser = base_parser(__doc__.splitlines()[0])
     parser.add_argument("--cases", default=None, help="comma-separated case names (default: all)")
+    parser.add_argument("--baseline", default=None, help="a checkout of another commit: run every case with its jaxmech too, interleaved")
+    parser.add_argument("--warm-repeats", type=int, default=1, help="warm runs per case; the median is reported (a shared machine is noisy)")
     args = parser.parse_args(argv)
     cases = args.cases.split(",") if args.cases else None
-    res = run(quick=args.quick, cases=cases)
+    baseline = Path(args.baseline).resolve() if args.baseline else None
+    res = run(quick=args.quick, cases=cases, baseline=baseline, warm_repeats=args.warm_repeats)
     path = write_result("latency", res, out_dir=args.out)
     print(json.dumps(res.get("ratios", {}), indent=1))
     print(f"wrote {path}")

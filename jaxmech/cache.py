@@ -21,7 +21,7 @@ from pathlib import Path
 
 import jax
 
-__all__ = ["default_cache_dir", "enable_compile_cache", "enable_default_cache", "compile_cache_dir"]
+__all__ = ["default_cache_dir", "enable_compile_cache", "enable_default_cache", "compile_cache_dir", "switched_off"]
 
 _OFF = {"0", "off", "false", "no", ""}
 
@@ -57,10 +57,15 @@ def enable_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s
     return str(folder)
 
 
+def switched_off() -> bool:
+    """True when ``JAXMECH_COMPILE_CACHE`` says no cache (``0``, ``off``, ``false``, ``no``)."""
+    env = os.environ.get("JAXMECH_COMPILE_CACHE")
+    return env is not None and env.strip().lower() in _OFF
+
+
 def enable_default_cache() -> None:
     """What ``import jaxmech`` does: respect an opt-out and the user's own JAX cache."""
-    env = os.environ.get("JAXMECH_COMPILE_CACHE")
-    if env is not None and env.strip().lower() in _OFF:
+    if switched_off():
         return
     if os.environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir:
         return

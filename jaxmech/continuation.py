@@ -29,6 +29,7 @@ import numpy as np
 
 from .linalg import cond1, small_max, small_norm, solve_blocks, where
 from .xla import unfused
+from .exported import cached_call
 from .mechanism import Mechanism
 from .structure import blocks
 from .implicit import attach_derivatives, implicit_root, root_derivatives
@@ -334,7 +335,7 @@ def _backward(mech, options, derivs, single, us, p, guess, out, n):
     q = np.asarray(out[0]).reshape(-1, us.shape[0], mech.m)
     start = np.where(need[:, None], q[np.arange(q.shape[0]), last], np.asarray(guess))
     order = np.concatenate([np.arange(n - 1, -1, -1), np.zeros(us.shape[0] - n, int)])
-    back = _stroke_program(mech, options, derivs, single, jax.device_put(np.asarray(us)[order]), p, jax.device_put(start.reshape(np.shape(guess))))
+    back = cached_call(_stroke_program, (mech, options, derivs, single), (jax.device_put(np.asarray(us)[order]), p, jax.device_put(start.reshape(np.shape(guess)))))
     axis = 0 if single else 1
     undo = np.concatenate([np.arange(n - 1, -1, -1), np.arange(n, us.shape[0])])  # reversed index of each point
     status_b = np.asarray(back[1]).reshape(-1, us.shape[0])[:, undo][:, :n]
@@ -391,7 +392,8 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     nb = bucket(n)
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[-1:], nb - n, axis=0)])
-    out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf)
+    # a new process runs the stored exported program where exactly equivalent (concrete arguments)
+    out = cached_call(_stroke_program, (mech, options, bool(derivs), single), (us_, pf, gf))
     if not traced:
         out = _backward(mech, options, bool(derivs), single, us_, pf, gf, out, n)
     if nb > n:

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 
 from .mechanism import Mechanism
 from .continuation import solve_stroke, stroke
+from .exported import cached_call
 from .implicit import implicit_root, root_derivatives
 from .options import SolverOptions
 from .solution import Solution
@@ -207,7 +208,8 @@ def _motion_eval(mech, point_names, drive, p, t, q, d1, d2):
     # function is static (it is hashable), so it recompiles only when the function changes.
     leaves, treedef = jax.tree_util.tree_flatten(drive)
     if all(isinstance(x, (jax.Array, float, int)) or hasattr(x, "dtype") for x in leaves) and leaves:
-        return _motion_eval_leaves(mech, point_names, treedef, [jnp.asarray(x, t.dtype) for x in leaves], p, t, q, d1, d2)
+        leaves = [jnp.asarray(x, t.dtype) for x in leaves]
+        return cached_call(_motion_eval_leaves, (mech, point_names, treedef), (leaves, p, t, q, d1, d2))
     return _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2)
 
 

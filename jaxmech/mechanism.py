@@ -239,6 +239,14 @@ class Mechanism:
             return ("id", id(self))
         return ("jaxpr", digest.hexdigest())
 
+    @property
+    def program_key(self) -> str | None:
+        """A fingerprint of what a compiled program depends on (names and the traced programs
+        of every function), equal for identical mechanisms in any process; None when a
+        function does not trace (then the mechanism is identified by the object alone)."""
+        kind, value = self._key
+        return value if kind == "jaxpr" else None
+
     def __eq__(self, other):
         return self is other or (isinstance(other, Mechanism) and self._key == other._key)
 

@@ -69,6 +69,7 @@ from ..dynamics import Body, Gravity, Model, Moment, PointForce, generalized_for
 from ..kinematics import Motion, chain_rule
 from ..mechanism import Mechanism, cis
 from ..continuation import solve_stroke
+from ..exported import cached_call
 from ..status import Status
 from .base import Scene
 
@@ -349,7 +350,8 @@ def torque(p: Mapping, motion: Motion):
     """
     dt = motion.q.dtype
     pj = {k: jnp.asarray(v, dt) for k, v in p.items()}
-    return _torque_batch(pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt), motion.dq_du, motion.d2q_du2)
+    args = (pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt), motion.dq_du, motion.d2q_du2)
+    return cached_call(_torque_batch, (), args)  # a new process skips tracing (jaxmech.exported)
 
 
 def voltage(p: Mapping, motion: Motion, torque_values=None):
