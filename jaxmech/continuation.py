@@ -122,7 +122,8 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
 #: half-turns for angles and length scales for lengths (deterministic, so a stroke's result
 #: does not depend on anything but its inputs).  14: with 6, 1 in ~20 random six-bars
 #: crossing gaps left a stretch after a gap on the other branch of a loop; with 14, none of
-#: 210 did (vmapped, so the count costs run time in failing blocks only, not compile time).
+#: 210 did (tried one after another only while a point is unresolved: the count costs
+#: run time only where the guess fails, and no compile time).
 _STARTS = 14
 
 
@@ -134,14 +135,19 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
     """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
     from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
 
-    ``newton.newton`` runs from the guess (the anchor itself where the predicted guess is off
-    the branch; once with a tenth of the step cap) and from ``_STARTS`` fixed offsets
-    around ``ref``, all at once (vmapped: one
-    compiled kernel); the guess's root is kept when it is on the branch, else the first
-    start that reached it (else a root on another branch: ``BRANCH``).  This is the fresh assembly a stroke needs after a gap, where
-    no pose near the last trusted one exists to continue from.  Angles are then moved by
-    whole turns to lie within half a turn of the guess (where the equations allow it:
-    checked on the residual), so a stroke's angles are continuous as numbers.
+    ``newton.newton`` runs from one start after another until a root on the branch is
+    found: the guess (the anchor itself where the predicted guess is off the branch), the
+    guess again with a tenth of the step cap (which keeps Newton on the near side of a fold,
+    a toggle the stroke re-enters at, where full steps overshoot), then ``_STARTS`` fixed
+    offsets around ``ref``: the fresh assembly a stroke needs after a gap, where no pose
+    near the last trusted one exists to continue from.  One call site of the kernel, in a
+    ``while_loop``: under ``vmap`` a block whose points all close from their guesses costs
+    one Newton solve, as without restarts, and finished lanes skip the later starts.  The
+    best answer is kept: a root on the branch, else one that exists only on another branch
+    (``BRANCH`` says more than a stall), else the guess's own status; the earliest start
+    wins a tie.  Angles are then moved by whole turns to lie within half a turn of the
+    guess (where the equations allow it: checked on the residual), so a stroke's angles are
+    continuous as numbers.
 
     Returns ``(q, status, steps, residual, cond, branch)`` like ``newton`` (no ``flipped``).
     """
@@ -149,15 +155,26 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
     s = coord_scales(mech, p, dtype)
     angle = ~jnp.asarray(mech.coord_is_length())
     g0 = where(on_branch(target, mech.branch_value(guess, u, p)), guess, ref) if mech.branch is not None else guess
-    starts = jnp.concatenate([g0[None], g0[None], ref[None] + jnp.asarray(_offsets(mech.m), dtype) * where(angle, jnp.pi, s)])
-    # the guess twice: with the usual step cap, and with a tenth of it, which keeps Newton on
-    # the near side of a fold (a toggle the stroke re-enters at) where full steps overshoot
-    caps = jnp.asarray([opts.max_step, 0.1 * opts.max_step] + [opts.max_step] * _STARTS, dtype)
-    q, st, steps, rn, cond, br, _ = jax.vmap(lambda g, c: newton(mech, opts, u, p, g, target, c))(starts, caps)
-    # on the branch first, then a pose that exists only on another branch (BRANCH says more
-    # than a stall), then the guess's own answer; the earliest start wins a tie
-    i = jnp.argmax(where(st == Status.CONVERGED, 2, where(st == Status.BRANCH, 1, 0)))
-    q, st, steps, rn, cond, br = (x[i] for x in (q, st, steps, rn, cond, br))
+    table = ref[None] + jnp.asarray(_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
+    last = _STARTS + 2
+    score = lambda st: where(st == Status.CONVERGED, 2, where(st == Status.BRANCH, 1, 0))  # noqa: E731
+
+    def wanted(carry):
+        j, best = carry
+        return (j < last) & (best[-1] < 2)
+
+    def attempt(carry):
+        j, best = carry
+        g = where(j < 2, g0, table[jnp.clip(j - 2, 0, _STARTS - 1)])
+        cap = where(j == 1, 0.1 * opts.max_step, opts.max_step).astype(dtype)
+        q, st, steps, rn, cond, br, _ = newton(mech, opts, u, p, g, target, cap, skip=~wanted(carry))
+        new = (q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br, score(st))
+        take = wanted(carry) & (new[-1] > best[-1])
+        return j + 1, jax.tree_util.tree_map(lambda a, b: where(take, a, b), new, best)
+
+    zero = jnp.zeros((), dtype)
+    none = (guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero, mech.branch_value(guess, u, p), jnp.asarray(-1))
+    _, (q, st, steps, rn, cond, br, _) = jax.lax.while_loop(wanted, attempt, (jnp.zeros((), jnp.int32), none))
     # Whole turns towards the guess, kept only if the equations do not notice them.
     turns = where(angle, jnp.round((q - guess) / (2 * jnp.pi)), 0.0)
     q_w = q - 2 * jnp.pi * turns

@@ -87,7 +87,7 @@ class _NewtonState(NamedTuple):
     crossed: jax.Array  # whether the guard refused a better step
 
 
-def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None):
+def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None, skip=None):
     """Damped Newton / Levenberg-Marquardt for one sample (no gradients): the one kernel that
     serves single solves, stroke anchors and every stroke point.
 
@@ -103,7 +103,8 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     stalls, the guard is lifted once: a root found across is ``BRANCH``, none found
     ``INFEASIBLE``.  A guess off the requested branch may move freely until it reaches it.
 
-    ``max_step`` (may be traced) overrides ``opts.max_step``.
+    ``max_step`` (may be traced) overrides ``opts.max_step``; ``skip`` (traced bool) runs no
+    iteration at all (under ``vmap``, a lane whose answer is not wanted then costs nothing).
 
     Returns ``(q, status, steps, residual, cond, branch, flipped)``; ``q`` is the last
     iterate (not masked), ``flipped`` the ``Solution.flipped`` bit mask.  A closed residual (``<= ftol``) whose step cannot meet ``xtol`` means the
@@ -188,7 +189,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     zero = jnp.zeros((), dtype)
     init = _NewtonState(
         k=jnp.zeros((), jnp.int32), q=guess, r=jnp.zeros((m,), dtype), rn=jnp.asarray(jnp.inf, dtype), js=eye,
-        dz=jnp.zeros((m,), dtype), size=zero, mu=zero, slow=jnp.zeros((), jnp.int32), done=~inputs_ok,
+        dz=jnp.zeros((m,), dtype), size=zero, mu=zero, slow=jnp.zeros((), jnp.int32), done=~inputs_ok if skip is None else ~inputs_ok | skip,
         stalled=jnp.asarray(False), guard=jnp.asarray(True), crossed=jnp.asarray(False),
     )
     st = jax.lax.while_loop(cond_fn, body, init)
