@@ -76,7 +76,7 @@ print("LATENCY_JSON " + json.dumps(out))
 
 _FOURBAR = """
 fourbar = jm.Mechanism(
-    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"), lengths=("a", "b", "c", "d"),
     constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d],
     branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
 )
@@ -95,7 +95,7 @@ us = np.linspace(0, 2 * np.pi, 361)
 jax.block_until_ready(jm.stroke_kinematics(fourbar, us, p, jnp.array([0.4, 1.7])))
 t0 = time.perf_counter()
 again = jm.Mechanism(
-    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"),
+    coords=("theta3", "theta4"), inputs=("theta2",), params=("a", "b", "c", "d"), lengths=("a", "b", "c", "d"),
     constraints=lambda q, u, p: [p.a * jm.cis(u.theta2) + p.b * jm.cis(q.theta3) - p.c * jm.cis(q.theta4) - p.d],
     branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
 )
