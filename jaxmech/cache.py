@@ -40,7 +40,7 @@ def compile_cache_dir() -> str | None:
     return jax.config.jax_compilation_cache_dir
 
 
-def enable_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s: float = 0.1) -> str | None:
+def enable_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s: float = 0.0) -> str | None:
     """Switch JAX's persistent compilation cache on at ``path`` (default ``default_cache_dir()``).
 
     Returns the folder in use, or None when it cannot be created (a read-only home: the

@@ -39,6 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .xla import jit
+
 __all__ = ["Stated", "Program", "ConstrainedResult", "program", "minimize", "FAIL_VIOLATION"]
 
 #: Scaled violation reported for every constraint at a design that cannot be assembled.
@@ -102,7 +104,7 @@ def program(state: Callable, names, x_example) -> Program:
         return v, jac, ok
 
     t0 = time.perf_counter()
-    compiled = jax.jit(both).lower(x_example).compile()
+    compiled = jit(both).lower(x_example).compile()
     return Program(names, sizes, compiled, time.perf_counter() - t0)
 
 

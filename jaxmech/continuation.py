@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .linalg import cond1, small_max, small_norm, solve_blocks, where
-from .xla import unfused
+from .xla import jit, unfused
 from .exported import cached_call
 from .mechanism import Mechanism
 from .structure import blocks
@@ -198,7 +198,7 @@ def _block_size(n: int, anchors: int) -> int:
 
 
 # --------------------------------------------------------------------------- the stroke program
-@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
 def _stroke_program(mech, options, derivs, single, us, p, guess):
     """Strokes of D designs: ``us (N, dof)`` (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
 

@@ -34,6 +34,7 @@ from .scenes.base import Scene
 from .options import SolverOptions
 from .status import Status
 from .sweep import design_columns
+from .xla import jit
 
 __all__ = [
     "FitResult",
@@ -263,7 +264,7 @@ class Sensitivities:
         return "\n".join(lines)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
+@functools.partial(jit, static_argnums=(0, 1))
 def _value_and_grad_batch(figure, wrt, p_wrt, p_rest):
     def masked(pw, pr):
         value, ok = _split(figure({**pr, **pw}))
@@ -484,7 +485,7 @@ def _default_optimizer():
     return optax.with_extra_args_support(optax.lbfgs())
 
 
-@functools.partial(jax.jit, static_argnums=tuple(range(10)))
+@functools.partial(jit, static_argnums=tuple(range(10)))
 def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi, p0):
     lo, hi = dict(lo), dict(hi)
     tiny = jnp.finfo(jnp.result_type(float)).tiny

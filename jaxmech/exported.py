@@ -41,14 +41,15 @@ import jax
 import jaxlib
 
 from .cache import compile_cache_dir, switched_off
+from .xla import jit
 
 __all__ = ["cached_call", "export_dir", "export_stats", "source_hash", "static_token"]
 
 # What ``cached_call`` did, per process: loaded (a stored program was used), exported (one
 # was written), fallback (the normal path ran where a key existed but export failed).
 _STATS = {"loaded": 0, "exported": 0, "fallback": 0}
-# key -> the callable that serves it in this process (None: export failed, use the jit path)
-_PROGRAMS: dict[str, object] = {}
+# (folder, key) -> the callable that serves it in this process (None: export failed, use the jit path)
+_PROGRAMS: dict[tuple[str, str], object] = {}
 _FOLDER = "jaxmech-exported"
 _OFF = {"0", "off", "false", "no"}
 # JAX flags that change what a traced program is
@@ -149,7 +150,7 @@ def _program(fn, static: tuple, args: tuple, key: str, folder: Path):
     try:
         exp = jax.export.deserialize(bytearray(path.read_bytes()))
         _STATS["loaded"] += 1
-        return jax.jit(exp.call)
+        return jit(exp.call)
     except Exception:  # absent, unreadable or from another version: export it anew
         pass
     try:
@@ -161,11 +162,11 @@ def _program(fn, static: tuple, args: tuple, key: str, folder: Path):
         _STATS["exported"] += 1
     except Exception:  # no serializer (flatbuffers) or a read-only cache: used in this process only
         pass
-    return jax.jit(exp.call)
+    return jit(exp.call)
 
 
 def cached_call(fn, static: tuple, args: tuple):
-    """``fn(*static, *args)`` for a ``jax.jit`` function whose static arguments come first,
+    """``fn(*static, *args)`` for a ``jit`` function whose static arguments come first,
     by its stored exported program where that is exactly equivalent (see the module
     docstring), else by ``fn`` itself."""
     folder = export_dir()
@@ -174,13 +175,14 @@ def cached_call(fn, static: tuple, args: tuple):
     key = _key(fn, static, args)
     if key is None:
         return fn(*static, *args)
-    if key not in _PROGRAMS:
-        _PROGRAMS[key] = _program(fn, static, args, key, folder)
-    prog = _PROGRAMS[key]
+    slot = (str(folder), key)  # a process may switch cache folders: each gets its own file
+    if slot not in _PROGRAMS:
+        _PROGRAMS[slot] = _program(fn, static, args, key, folder)
+    prog = _PROGRAMS[slot]
     if prog is not None:
         try:
             return prog(*args)
         except Exception:  # e.g. a stored program the runtime rejects: never again this process
-            _PROGRAMS[key] = None
+            _PROGRAMS[slot] = None
     _STATS["fallback"] += 1
     return fn(*static, *args)

@@ -24,6 +24,7 @@ from .exported import cached_call
 from .implicit import implicit_root, root_derivatives
 from .options import SolverOptions
 from .solution import Solution
+from .xla import jit
 
 __all__ = [
     "ConstantSpeed",
@@ -197,7 +198,7 @@ def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p,
     return (u, ud, udd, q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def _motion_eval_leaves(mech, point_names, drive_def, drive_leaves, p, t, q, d1, d2):
     drive = jax.tree_util.tree_unflatten(drive_def, drive_leaves)
     return jax.vmap(lambda t_, q_, a_, b_: _one_sample(mech, point_names, drive, p, t_, q_, a_, b_))(t, q, d1, d2)
@@ -213,7 +214,7 @@ def _motion_eval(mech, point_names, drive, p, t, q, d1, d2):
     return _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2):
     return jax.vmap(lambda t_, q_, a_, b_: _one_sample(mech, point_names, drive, p, t_, q_, a_, b_))(t, q, d1, d2)
 

@@ -31,6 +31,7 @@ from .scenes import Scene, SceneResult, get_scene
 from .status import Status, status_counts
 from .sweep import design_motion
 from .units import for_reading
+from .xla import jit
 
 __all__ = ["LiveView", "live_view", "update", "sliders", "evaluate"]
 
@@ -38,7 +39,7 @@ __all__ = ["LiveView", "live_view", "update", "sliders", "evaluate"]
 _OUTPUT_UNITS: dict = {}
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
+@functools.partial(jit, static_argnums=(0, 1))
 def _evaluate(scene: Scene, points: int, p):
     mo, ok = design_motion(scene, points, p)
     outs = scene.outputs(p, mo) if scene.outputs is not None else {}

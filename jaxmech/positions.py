@@ -22,6 +22,7 @@ from .newton import newton
 from .options import SolverOptions
 from .solution import Solution, raise_if_failed
 from .status import Status
+from .xla import jit
 
 __all__ = ["solve", "solve_one"]
 
@@ -40,8 +41,8 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
     return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, flipped=flipped, coords=mech.coords, branches=mech.branches)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
-@functools.partial(jax.jit, static_argnums=(0, 1))
+@functools.partial(jit, static_argnums=(0, 1))
+@functools.partial(jit, static_argnums=(0, 1))
 def _solve_flat(mech, options, u, p, guess):
     return jax.vmap(lambda u_, p_, g_: solve_one(mech, u_, p_, g_, options))(u, p, guess)
 

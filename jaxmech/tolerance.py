@@ -28,6 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .xla import jit
+
 __all__ = ["ToleranceResult", "analyse", "monte_carlo"]
 
 
@@ -74,7 +76,7 @@ class ToleranceResult:
         return "\n".join(lines)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
+@functools.partial(jit, static_argnums=(0, 1))
 def _jacobians(figure, names, varied, rest):
     def one(v, r):
         def f(v_):
@@ -117,7 +119,7 @@ def analyse(figure: Callable, designs: Mapping, tol: Mapping[str, float], *, z: 
     )
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
+@functools.partial(jit, static_argnums=(0, 1))
 def _sampled(figure, names, varied, rest, dev):
     # varied (D, P), dev (M, P): figure at every design x sample, (D, M) per figure.
     def one(v, r):

@@ -7,14 +7,61 @@ few packed values through an identity product makes them one materialised array.
 other backends (GPU: fusions are cheap to recompute, memory traffic is not) the values
 pass unchanged.  ``tests/test_xla.py`` counts the sines and cosines this saves in a compiled
 residual-and-derivatives program.
+
+XLA's CPU fusion emitters (the MLIR code generator for fused loops, on by default in
+jaxlib 0.10) take twice as long to compile the library's programs as the classic LLVM IR
+emitters, for the same values: the four-bar's stroke program compiles in 0.59 s instead of
+1.18 s and runs in 0.97 instead of 1.28 ms (``benchmarks/latency.py``).  ``jit`` compiles
+the library's programs with ``COMPILER_OPTIONS``, which turn them off; a CPU-only field of
+XLA's debug options, which no other backend reads.  ``tests/test_xla.py`` checks that a
+stroke and a scene's outputs are the same either way.
 """
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
-__all__ = ["unfused"]
+__all__ = ["COMPILER_OPTIONS", "jit", "unfused"]
+
+#: XLA options for every program the library compiles itself (see the module docstring).
+#: A user's own ``jax.jit`` around library calls compiles with the user's options.
+COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+
+def jit(fun=None, **kwargs):
+    """``jax.jit`` with ``COMPILER_OPTIONS`` where JAX allows them; usable as ``@jit``,
+    ``@jit(static_argnums=...)`` or ``functools.partial(jit, static_argnums=...)``.
+
+    JAX takes compiler options only on a top-level ``jit``: a call with traced arguments (the
+    library inside a user's ``jit``, ``vmap`` or ``grad``) runs the plain ``jax.jit``
+    function, which the enclosing program compiles with its own options."""
+    if fun is None:
+        return functools.partial(jit, **kwargs)
+    return _Jitted(jax.jit(fun, compiler_options=COMPILER_OPTIONS, **kwargs), jax.jit(fun, **kwargs))
+
+
+class _Jitted:
+    """A function jitted twice: with the options (top level) and without (inside a trace)."""
+
+    def __init__(self, top, nested):
+        self._top, self._nested = top, nested
+        functools.update_wrapper(self, nested)
+
+    def __call__(self, *args, **kwargs):
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+            return self._nested(*args, **kwargs)
+        try:
+            return self._top(*args, **kwargs)
+        except ValueError as err:  # concrete arguments, but inside a trace all the same
+            if "compiler_options" not in str(err):
+                raise
+            return self._nested(*args, **kwargs)
+
+    def __getattr__(self, name):  # lower, trace, eval_shape...: the top-level function's
+        return getattr(self._top, name)
 
 
 def _on_cpu() -> bool:

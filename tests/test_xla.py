@@ -49,3 +49,34 @@ def test_unfused_saves_sines_on_cpu(monkeypatch):
     assert n_with < n_without, (n_with, n_without)  # measured: 6 against 14
     for a, b in zip(jax.tree_util.tree_leaves(with_it), jax.tree_util.tree_leaves(without)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-15, atol=1e-15)
+
+
+#: How far the classic CPU emitters may round differently from the default ones, in units of
+#: the float64 epsilon relative to the largest value of each output (measured: 0 for fourbar,
+#: landing_gear and arc_track_flap; 4.8 for flap_msd; 7.0 for sma_flap).
+ROUNDING_EPS = 16
+
+
+@pytest.mark.parametrize("scene_name", ["fourbar", "flap_msd", "sma_flap"])
+def test_compiler_options_give_the_same_values(scene_name):
+    """The library compiles its programs with ``xla.COMPILER_OPTIONS`` (the classic CPU
+    emitters, for compile time): a whole stroke with its derivatives and points comes out as
+    XLA's default options give it, with the same statuses and values equal to rounding."""
+    from jaxmech.scenes import get_scene
+    from jaxmech.sweep.evaluate import design_motion
+
+    scene = get_scene(scene_name)
+    p = scene.params()
+
+    def motion(p_):
+        return design_motion(scene, 41, p_)
+
+    with_options = jax.jit(motion, compiler_options=xla.COMPILER_OPTIONS)(p)
+    default = jax.jit(motion)(p)
+    assert bool(jnp.all(with_options[1]))  # every sample converged: the values are real
+    np.testing.assert_array_equal(np.asarray(with_options[0].status), np.asarray(default[0].status))
+    eps = np.finfo(np.float64).eps
+    for a, b in zip(jax.tree_util.tree_leaves(with_options), jax.tree_util.tree_leaves(default)):
+        a, b = np.asarray(a), np.asarray(b)
+        scale = float(np.max(np.abs(b))) if b.size else 0.0
+        np.testing.assert_allclose(a, b, rtol=0, atol=ROUNDING_EPS * eps * scale)

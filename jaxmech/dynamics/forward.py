@@ -29,6 +29,7 @@ from .closure import close_loop
 from .model import Model, mechanism_params, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
+from ..xla import jit
 
 __all__ = ["METHODS", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "integrate", "forward_dynamics"]
 
@@ -253,7 +254,7 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
     return jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its
 
 
-_integrate_jit = jax.jit(integrate, static_argnums=0)
+_integrate_jit = jit(integrate, static_argnums=0)
 
 
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",

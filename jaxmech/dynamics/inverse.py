@@ -19,6 +19,7 @@ from ..options import SolverOptions
 from ..positions import solve_one
 from .model import Model, mechanism_params, prepare_params
 from .virtual_power import generalized_forces
+from ..xla import jit
 
 __all__ = ["InverseDynamics", "inverse_dynamics", "inverse_dynamics_at", "inverse_dynamics_batch"]
 
@@ -55,7 +56,7 @@ def _id_one(model, quasi_static, u, ud, udd, p, t, guess, options):
     return sol.q, tau, lam, sol.status
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def inverse_dynamics_batch(model, quasi_static, options, u, ud, udd, p, t, guess):
     """The compiled kernel of ``inverse_dynamics_at`` on a flat batch (jit; `model`,
     `quasi_static` and `options` static): `u`, `ud`, `udd` ``(n, dof)``, `p` leaves ``(n,)``,
@@ -101,13 +102,13 @@ def _id_drive_one(model, quasi_static, drive, p, t_, q_, d1, d2):
     return u, ud, udd, tau, lam
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def _id_drive_leaves(model, quasi_static, drive_def, drive_leaves, p, t, q, d1, d2):
     drive = jax.tree_util.tree_unflatten(drive_def, drive_leaves)
     return jax.vmap(lambda *a: _id_drive_one(model, quasi_static, drive, p, *a))(t, q, d1, d2)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def _id_drive_static(model, quasi_static, drive, p, t, q, d1, d2):
     return jax.vmap(lambda *a: _id_drive_one(model, quasi_static, drive, p, *a))(t, q, d1, d2)
 

@@ -27,6 +27,7 @@ from .closure import close_loop
 from .model import Model, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces
+from ..xla import jit
 
 __all__ = ["Equilibrium", "equilibrium", "static_residual"]
 
@@ -158,7 +159,7 @@ def _equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: i
     return u_eq, q_eq, jnp.where(good, j, jnp.nan), status.astype(jnp.int32), k
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
 def _equilibrium_batch(model, applied, options, max_steps, lo, hi, u0, guess, p, t):
     return jax.vmap(lambda *a: _equilibrium_one(model, applied, options, max_steps, *a))(lo, hi, u0, guess, p, t)
 

@@ -75,6 +75,7 @@ from ..mechanism import Mechanism, cis
 from ..positions import solve_one
 from ..status import Status, status_message
 from .base import Scene, run_scene
+from ..xla import jit
 
 __all__ = [
     "SCENE",
@@ -398,7 +399,7 @@ def _quasi_static_one(q, u, p):
                 F34y=jnp.imag(jnp.conj(e_s) * F42), lam=lam)
 
 
-@jax.jit
+@jit
 def _quasi_static_batch(q, u, p):
     return jax.vmap(lambda q_, u_: _quasi_static_one(q_, u_, p))(q, u)
 
@@ -441,7 +442,7 @@ _SOLVED_POINTS = ("A", "B", "D", "G", "F")
 _CHUNK = 32  # one compiled solve serves every batch size (inputs are padded to chunks)
 
 
-@jax.jit
+@jit
 def _solve_chunk(s, p):
     """Engine solve (from the closed pose) and quasi-static forces for a chunk of travels."""
     guess = _guess(p)

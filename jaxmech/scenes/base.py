@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
+import weakref
 from collections.abc import Callable, Mapping
 
 import jax.numpy as jnp
@@ -14,6 +16,7 @@ from ..kinematics import ConstantSpeed, Motion, motion
 from ..mechanism import Mechanism
 from ..status import Status, status_counts
 from ..units import for_reading
+from ..xla import jit
 from .columns import table_columns
 
 __all__ = ["Scene", "SceneResult", "run_scene"]
@@ -175,5 +178,26 @@ def run_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
             f"{len(bad)} of {points} positions fail, first at {uname} = {float(mo.u[bad[0], 0]):.6g} "
             f"{scene.units[uname]} ({status_counts(status)}); change the link lengths or the stroke"
         )
-    outs = scene.outputs(p, mo) if scene.outputs is not None else {}
-    return SceneResult(scene=scene, params=p, motion=mo, outputs=dict(outs))
+    return SceneResult(scene=scene, params=p, motion=mo, outputs=_scene_outputs(scene, p, mo))
+
+
+# A scene's units per output, noted when its outputs are traced (a unit is not an array).
+_UNITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@functools.partial(jit, static_argnums=0)
+def _output_values(scene: Scene, p, mo: Motion):
+    outs = scene.outputs(p, mo)
+    _UNITS[scene] = {k: unit for k, (_, unit) in outs.items()}
+    return {k: v for k, (v, _) in outs.items()}
+
+
+def _scene_outputs(scene: Scene, p, mo: Motion) -> dict:
+    """``scene.outputs(p, mo)`` as one compiled program: run eagerly, its few dozen array
+    operations would each compile a program of their own (10-30 ms apiece, ~1 s for
+    flap_msd).  A scene is static here by identity (``Scene`` compares by identity)."""
+    if scene.outputs is None:
+        return {}
+    values = _output_values(scene, p, mo)
+    units = _UNITS[scene]
+    return {k: (values[k], units[k]) for k in units}

@@ -58,6 +58,7 @@ section (d)); those that change numbers:
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Mapping
 
 import jax
@@ -72,6 +73,7 @@ from ..continuation import solve_stroke
 from ..exported import cached_call
 from ..status import Status
 from .base import Scene
+from ..xla import jit
 
 __all__ = [
     "SCENE",
@@ -250,6 +252,7 @@ def _dyad(p1, r1, p2, r2, sign):
     return jnp.angle(p2 - p1) + sign * jnp.arccos(cos_)  # arccos gives NaN for |cos_| > 1
 
 
+@functools.partial(jit, static_argnames="signs")  # one program, not ~15 eager operations
 def closed_form_positions(p: Mapping, alpha, signs=BRANCH_SIGNS):
     """Positions ``q`` by three circle intersections (dyads), one per loop.
 
@@ -331,7 +334,7 @@ MODEL = Model(
 MOTOR = DCMotor(resistance="R_a", constant="K_m")
 
 
-@jax.jit
+@jit
 def _torque_batch(p, q, u, ud, udd, t, d1, d2):
     def one(q_, u_, ud_, udd_, t_, d1_, d2_):
         qd, qdd = chain_rule(d1_, d2_, ud_, udd_)  # this drive's rates from dq/du, d2q/du2
@@ -429,7 +432,7 @@ def _fold_residual(z, p, L):
     return jnp.concatenate([phi, jnp.linalg.det(jac)[None]])
 
 
-@jax.jit
+@jit
 def _fold_newton(z, p):
     L = mechanism.length_scale(p)
 

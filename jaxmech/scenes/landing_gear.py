@@ -63,6 +63,7 @@ from ..options import SolverOptions
 from ..positions import solve
 from ..solution import Solution
 from .base import Scene
+from ..xla import jit
 
 __all__ = [
     "SCENE",
@@ -280,7 +281,7 @@ def linear_angle_motion(p: Mapping, t, omega=DTHETA / T_RETRACT) -> Motion:
     )
 
 
-@functools.partial(jax.jit, static_argnums=(0,))
+@functools.partial(jit, static_argnums=(0,))
 def _derivatives(mech, q, u, p):
     return jax.vmap(lambda q_, u_: input_derivatives(mech, q_, u_, p))(q, u)
 

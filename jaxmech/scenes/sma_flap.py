@@ -73,6 +73,7 @@ from ..options import SolverOptions
 from ..positions import solve
 from ..solution import Solution
 from .base import Scene
+from ..xla import jit
 
 __all__ = [
     "SCENE",
@@ -433,7 +434,7 @@ class FixedPoint:
     amplitude: np.ndarray
 
 
-@functools.partial(jax.jit, static_argnums=(3, 4))
+@functools.partial(jit, static_argnums=(3, 4))
 def _fp_step(theta, eps, p, n, law):
     # Algorithm 1 (corrected physics), Jacobi sweep over the hinges: the spring tension that
     # balances hinge j at theta^k (eq. 1.15) -> spring length -> theta_j^{k+1} from the spring's
@@ -481,7 +482,7 @@ def fixed_point(p: Mapping, u, *, n_hinges: int = 2, drive: str = "strain", thet
     return FixedPoint(th, maxit, "maxit", H, nan)
 
 
-@functools.partial(jax.jit, static_argnums=(3, 4))
+@functools.partial(jit, static_argnums=(3, 4))
 def _rate_parts(th, eps, p, n, law):
     return stiffness(th, eps, p, n_hinges=n, law=law), _geometry(th, p, n)[1][1]
 
@@ -505,7 +506,7 @@ def newton_history(p: Mapping, u, *, n_hinges=2, drive="strain", theta0=None, to
     ``fixed_point``."""
     th = jnp.zeros(n_hinges) if theta0 is None else jnp.asarray(theta0, float)
     eps, pp = drive_params(p, u, n_hinges=n_hinges, drive=drive)
-    f = jax.jit(lambda t, e, q: (residual(t, e, q, n_hinges=n_hinges, law=law), stiffness(t, e, q, n_hinges=n_hinges, law=law)))
+    f = jit(lambda t, e, q: (residual(t, e, q, n_hinges=n_hinges, law=law), stiffness(t, e, q, n_hinges=n_hinges, law=law)))
     hist = []
     for _ in range(maxit + 1):
         R, H = f(th, eps, pp)
@@ -517,7 +518,7 @@ def newton_history(p: Mapping, u, *, n_hinges=2, drive="strain", theta0=None, to
 
 
 # --------------------------------------------------------------------------- the scene
-@functools.partial(jax.jit, static_argnums=(0,))
+@functools.partial(jit, static_argnums=(0,))
 def _outputs_batch(n, p, q, eps):
     def one(th, e):
         tw, ts = _tensions(th, e, p, n)

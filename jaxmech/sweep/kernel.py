@@ -21,6 +21,7 @@ from ..options import SolverOptions
 from ..status import Status
 from .designs import reject
 from .evaluate import Figures, design_columns, design_motion, mask_failed, stroke_figures, table_columns
+from ..xla import jit
 
 __all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
 
@@ -137,7 +138,7 @@ def compiled_kernel(scene: Scene, job: Job, param_names):
         return hit, sharding
     dtype = jnp.result_type(float)
     spec = {k: jax.ShapeDtypeStruct((job.chunk,), dtype, sharding=sharding) for k in param_names}
-    jitted = jax.jit(lambda p: _kernel(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
+    jitted = jit(lambda p: _kernel(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
     compiled = jitted.lower(spec).compile()
     if len(_COMPILED) > 32:
         _COMPILED.clear()
