@@ -12,9 +12,10 @@ XLA's CPU fusion emitters (the MLIR code generator for fused loops, on by defaul
 jaxlib 0.10) take twice as long to compile the library's programs as the classic LLVM IR
 emitters, for the same values: the four-bar's stroke program compiles in 0.59 s instead of
 1.18 s and runs in 0.97 instead of 1.28 ms (``benchmarks/latency.py``).  ``jit`` compiles
-the library's programs with ``COMPILER_OPTIONS``, which turn them off; a CPU-only field of
-XLA's debug options, which no other backend reads.  ``tests/test_xla.py`` checks that a
-stroke and a scene's outputs are the same either way.
+the library's programs with ``COMPILER_OPTIONS``, which turn them off: a field of XLA's
+debug options that only the CPU compiler reads (not yet run on a GPU: none was lent when
+this was written).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
+statuses, derivatives and points) comes out the same either way, to rounding.
 """
 
 from __future__ import annotations
