@@ -14,13 +14,22 @@ from .options import SolverOptions, tolerances
 from .status import Status
 from .structure import blocks
 
-__all__ = ["newton", "evaluator", "coord_scales", "on_branch", "off_branch", "flipped_mask", "all_finite"]
+__all__ = ["newton", "evaluator", "coord_scales", "on_branch", "off_branch", "flipped_mask", "all_finite", "per_lane"]
 
 
 def all_finite(tree) -> jax.Array:
     leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)]
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
+
+
+def per_lane(tree, flag):
+    """``tree`` unchanged in value, each leaf made to depend on ``flag`` (a bool computed from
+    the sample's inputs).  For the initial state of a ``while_loop``: under ``vmap`` JAX finds
+    which loop values are batched by re-tracing the body until that set stops growing, so a
+    state that is per sample from the start is traced one time fewer (per ``vmap`` level, and
+    a loop inside a loop multiplies that); XLA folds ``select(c, x, x)`` away."""
+    return jax.tree_util.tree_map(lambda x: where(flag, x, x), tree)
 
 
 def coord_scales(mech: Mechanism, p, dtype):
@@ -192,7 +201,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
         dz=jnp.zeros((m,), dtype), size=zero, mu=zero, slow=jnp.zeros((), jnp.int32), done=~inputs_ok if skip is None else ~inputs_ok | skip,
         stalled=jnp.asarray(False), guard=jnp.asarray(True), crossed=jnp.asarray(False),
     )
-    st = jax.lax.while_loop(cond_fn, body, init)
+    st = jax.lax.while_loop(cond_fn, body, per_lane(init, inputs_ok))
 
     cond = cond1(st.js, blocks(mech))
     # Near a toggle the attainable accuracy of q is about cond * eps, not xtol: a closed
