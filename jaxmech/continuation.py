@@ -19,7 +19,6 @@ a few sizes per octave, so 361 and 362 points share one compiled program.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from collections.abc import Mapping
 
@@ -201,17 +200,19 @@ def _block_size(n: int, anchors: int) -> int:
 # --------------------------------------------------------------------------- the stroke program
 @functools.partial(jit, static_argnums=(0, 1, 2, 3))
 def _stroke_program(mech, options, derivs, single, us, p, guess):
-    """Strokes of D designs: ``us (N, dof)`` (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
+    """Strokes of D designs: ``us (N, dof)`` shared or ``(D, N, dof)`` one per design
+    (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
 
     Returns ``(q, status, steps, residual, cond, branch, flipped, d1, d2)`` with ``(D, N)`` in front
     (the design axis dropped with ``single``); ``d1``, ``d2`` are None without ``derivs``.
     NaN where the status is not ``CONVERGED``.
     """
     stop = jax.lax.stop_gradient
-    n, dof = us.shape
     m = mech.m
     d = guess.shape[0]
     dtype = guess.dtype
+    n, dof = us.shape[-2:]
+    us = jnp.broadcast_to(us, (d, n, dof))
     # Non-finite inputs and parameters are replaced once, here, by harmless values (their
     # samples are flagged): no derivative code ever sees a NaN that could leak into a batch
     # gradient.
@@ -228,11 +229,12 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     # from the user's guess); blocks 1.. cover points 1..n-1, the last padded by repetition.
     k = _block_size(n, options.anchors)
     nblk = -(-(n - 1) // k) if n > 1 else 0
-    rest = jnp.concatenate([us_s[1:], jnp.broadcast_to(us_s[-1:], (nblk * k - (n - 1), dof))]) if n > 1 else us_s[:0]
-    blocks = jnp.concatenate([jnp.broadcast_to(us_s[:1], (1, k, dof)), rest.reshape(nblk, k, dof)])
+    rest = jnp.concatenate([us_s[:, 1:], jnp.broadcast_to(us_s[:, -1:], (d, nblk * k - (n - 1), dof))], axis=1) if n > 1 else us_s[:, :0]
+    blocks = jnp.concatenate([jnp.broadcast_to(us_s[:, :1], (d, k, dof)), rest], axis=1)
+    blocks = jnp.moveaxis(blocks.reshape(d, nblk + 1, k, dof), 1, 0)  # (nblk + 1, D, k, dof)
 
     if mech.branch is not None:
-        b0 = jnp.sign(jax.vmap(lambda g_, p_: mech.branch_value(g_, us_s[0], p_))(g0, ps))
+        b0 = jnp.sign(jax.vmap(lambda g_, u_, p_: mech.branch_value(g_, u_, p_))(g0, us_s[:, 0], ps))
     else:
         b0 = jnp.zeros((d,), dtype)
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
@@ -250,7 +252,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
 
     def per_block(fn, u_blk, *args):
         """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points (inner)."""
-        return jax.vmap(lambda p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_blk, *pts))(ps, b0, *args)
+        return jax.vmap(lambda u_d, p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_d, *pts))(u_blk, ps, b0, *args)
 
     def per_point(fn, u_blk, *args):
         """``per_block`` as one ``vmap`` over designs x points (``(D, k, ...)`` in and out), for
@@ -258,11 +260,10 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         its body to a fixed point at every ``vmap`` level, and two nested levels were half the
         stroke's trace.  (The checked step keeps the nested form: its parameter terms are then
         computed once per design, 15% of a four-bar stroke's run time.)"""
-        kk = u_blk.shape[0]
+        kk = u_blk.shape[1]
         flat = lambda x: x.reshape((d * kk,) + x.shape[2:])  # noqa: E731
         rep = lambda x: jnp.repeat(x, kk, axis=0)  # noqa: E731
-        u_f = jnp.broadcast_to(u_blk[None], (d,) + u_blk.shape).reshape(d * kk, dof)
-        out = jax.vmap(fn)(u_f, jax.tree_util.tree_map(rep, ps), rep(b0), *map(flat, args))
+        out = jax.vmap(fn)(flat(u_blk), jax.tree_util.tree_map(rep, ps), rep(b0), *map(flat, args))
         return jax.tree_util.tree_map(lambda x: x.reshape((d, kk) + x.shape[1:]), out)
 
     def robust(u_blk, g, q_a):
@@ -278,14 +279,14 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     # A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
     @jax.jit
     def derivatives_of(q, u, p_, ok):
-        return jax.vmap(jax.vmap(lambda q_, u_, p1, ok_: root_derivatives(mech, q_, u_, p1, ok_), (0, 0, None, 0)), (0, None, 0, 0))(q, u, p_, ok)
+        return jax.vmap(jax.vmap(lambda q_, u_, p1, ok_: root_derivatives(mech, q_, u_, p1, ok_), (0, 0, None, 0)))(q, u, p_, ok)
 
     def derivatives(q, u, ok):
         return derivatives_of(q, u, ps, ok)
 
     def scan_fn(carry, u_blk):
         q_a, d1_a, d2_a, u_a = carry
-        g = jax.vmap(guesses, (0, 0, 0, 0, 0, 0, 0, None))(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
+        g = jax.vmap(guesses)(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
         q1, qf, ok, rn, cond, br = per_block(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
         status = where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
 
@@ -293,7 +294,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
             if derivs:  # every point's dq/du and d2q/du2 (the last one's also serve the next anchor)
                 d1, d2 = derivatives(where(good[..., None], q_eval, 0.0), u_blk, good)
                 return d1, d2, d1[:, -1], d2[:, -1]
-            e1, e2 = derivatives(where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[-1:], good[:, -1:])
+            e1, e2 = derivatives(where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[:, -1:], good[:, -1:])
             return None, None, e1[:, 0], e2[:, 0]
 
         # derivatives at the checked step's iterate share its sines and cosines
@@ -321,15 +322,15 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         # block restarts from that pose instead of a series extrapolated across the gap.
         last_ok = status[:, -1] == Status.CONVERGED
         q_next = where(last_ok[:, None], qf[:, -1], q_a)
-        u_next = where(last_ok[:, None], u_blk[-1], u_a)
+        u_next = where(last_ok[:, None], u_blk[:, -1], u_a)
         return (q_next, e1, e2, u_next), (qf, status, steps, rn, cond, br, d1, d2)
 
-    init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), jnp.broadcast_to(us_s[0], (d, dof)))
+    init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), us_s[:, 0])
     _, out = jax.lax.scan(scan_fn, init, blocks)
     # (nblk + 1, D, k, ...) -> (D, n, ...): point 0 is block 0's last entry
     out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n], out)
     q, status, steps, rn, cond, br, d1, d2 = out
-    inputs_ok = p_fin[:, None] & us_fin[None, :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
+    inputs_ok = p_fin[:, None] & us_fin[:, :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
     status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
     flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(b0, br) if mech.branch is not None else jnp.zeros(status.shape, jnp.int32)
     flipped = where(status == Status.BRANCH, flipped, 0)
@@ -337,12 +338,12 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     q_star = where(ok[..., None], q, jnp.nan)
 
     # Attach the roots to (u, p): derivatives by the implicit function theorem.
-    u_out = us_s[:n]
-    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, None, 0))(q_star, ok, u_out, p)
+    u_out = us_s[:, :n]
+    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)))(q_star, ok, u_out, p)
     if derivs:
         d1 = where(ok[..., None, None], d1, jnp.nan)
         d2 = where(ok[..., None, None, None], d2, jnp.nan)
-        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, None, 0))(d1, d2, q_star, ok, u_out, p)
+        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)))(d1, d2, q_star, ok, u_out, p)
     res = (q, status, steps, rn, cond, br, flipped, d1, d2)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
@@ -360,7 +361,8 @@ def _backward(mech, options, derivs, single, us, p, guess, out, n):
     Concrete arguments only (the decision is made on the host); inside a user's trace the
     forward pass stands, and its failures keep their statuses.
     """
-    status = np.asarray(out[1]).reshape(-1, us.shape[0])[:, :n]
+    nb = us.shape[-2]  # the bucketed stroke length
+    status = np.asarray(out[1]).reshape(-1, nb)[:, :n]
     conv = status == Status.CONVERGED
     # a failed point with a converged one after it
     later = np.flip(np.logical_or.accumulate(np.flip(conv, 1), 1), 1)
@@ -368,15 +370,15 @@ def _backward(mech, options, derivs, single, us, p, guess, out, n):
     if not np.any(need):
         return out
     last = n - 1 - np.argmax(np.flip(conv, 1), axis=1)
-    q = np.asarray(out[0]).reshape(-1, us.shape[0], mech.m)
+    q = np.asarray(out[0]).reshape(-1, nb, mech.m)
     start = np.where(need[:, None], q[np.arange(q.shape[0]), last], np.asarray(guess))
-    order = np.concatenate([np.arange(n - 1, -1, -1), np.zeros(us.shape[0] - n, int)])
-    back = cached_call(_stroke_program, (mech, options, derivs, single), (jax.device_put(np.asarray(us)[order]), p, jax.device_put(start.reshape(np.shape(guess)))))
+    order = np.concatenate([np.arange(n - 1, -1, -1), np.zeros(nb - n, int)])
+    back = cached_call(_stroke_program, (mech, options, derivs, single), (jax.device_put(np.take(np.asarray(us), order, axis=-2)), p, jax.device_put(start.reshape(np.shape(guess)))))
     axis = 0 if single else 1
-    undo = np.concatenate([np.arange(n - 1, -1, -1), np.arange(n, us.shape[0])])  # reversed index of each point
-    status_b = np.asarray(back[1]).reshape(-1, us.shape[0])[:, undo][:, :n]
+    undo = np.concatenate([np.arange(n - 1, -1, -1), np.arange(n, nb)])  # reversed index of each point
+    status_b = np.asarray(back[1]).reshape(-1, nb)[:, undo][:, :n]
     take = need[:, None] & ~conv & (status_b == Status.CONVERGED)
-    take = np.concatenate([take, np.zeros((take.shape[0], us.shape[0] - n), bool)], axis=1)
+    take = np.concatenate([take, np.zeros((take.shape[0], nb - n), bool)], axis=1)
     take = take[0] if single else take
 
     def merge(f, b):
@@ -389,30 +391,35 @@ def _backward(mech, options, derivs, single, us, p, guess, out, n):
     # The reverse walk may count turns differently: shift each run it filled by the whole
     # turns that match it to the forward pass at the converged point that follows the run
     # (where both passes found the same pose), so the angles stay continuous as numbers.
-    qf = np.asarray(out[0]).reshape(-1, us.shape[0], mech.m)
+    qf = np.asarray(out[0]).reshape(-1, nb, mech.m)
     qb = np.take(np.asarray(back[0]), undo, axis=axis).reshape(qf.shape)
     qm = merged[0].reshape(qf.shape)
-    filled = take.reshape(-1, us.shape[0])
+    filled = take.reshape(-1, nb)
     for d_ in range(qf.shape[0]):
         runs = np.flatnonzero(filled[d_] & ~np.concatenate([[False], filled[d_, :-1]]))
         for r0 in runs:
-            r1 = r0 + np.argmin(filled[d_, r0:]) if not filled[d_, -1] else us.shape[0]
+            r1 = r0 + np.argmin(filled[d_, r0:]) if not filled[d_, -1] else nb
             if r1 < n and conv[d_, r1] and status_b[d_, r1] == Status.CONVERGED:
                 qm[d_, r0:r1] += 2 * np.pi * np.round((qf[d_, r1] - qb[d_, r1]) / (2 * np.pi))
     merged[0] = qm.reshape(merged[0].shape)
     return tuple(None if x is None else jax.device_put(x) for x in merged)
 
 
-def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, anchors: int | None = None):
+def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False):
     """Checks, broadcasting and shape bucketing shared by ``solve_stroke`` and
-    ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``)."""
-    if anchors is not None and anchors != options.anchors:
-        options = dataclasses.replace(options, anchors=int(anchors))
+    ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``).
+    ``per_design``: ``us (D, N, dof)`` holds one stroke per design (``p`` leaves ``(D,)``)."""
     us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
-    if us_.ndim != 2 or us_.shape[0] < 1:
+    if per_design:
+        us_ = us_.reshape(np.shape(us))  # (D, N, dof) as given
+        if us_.ndim != 3 or us_.shape[-1] != mech.dof or us_.shape[1] < 1:
+            raise ValueError(f"{mech.name}: per-design strokes must have shape (D, N, {mech.dof}), got {jnp.shape(us)}")
+    elif us_.ndim != 2 or us_.shape[0] < 1:
         raise ValueError(f"{mech.name}: us must be one stroke of shape (N,) or (N, {mech.dof}) with N >= 1, got {jnp.shape(us)}")
     shapes = {f"p[{k!r}]": v.shape for k, v in p.items()}
     shapes["guess"] = guess.shape[:-1]
+    if per_design:
+        shapes["us"] = us_.shape[:1]
     shape = batch_shape(mech, shapes)
     if len(shape) > 1:
         raise ValueError(f"{mech.name}: solve_stroke takes one batch axis of designs, got batch shape {shape}")
@@ -424,10 +431,10 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     xp = jnp if traced else np
     pf = {k: xp.broadcast_to(v, (d,)) for k, v in p.items()}
     gf = xp.broadcast_to(guess, (d, mech.m))
-    n = us_.shape[0]
+    n = us_.shape[-2]
     nb = bucket(n)
     if nb > n:  # pad by repeating the last input
-        us_ = xp.concatenate([us_, xp.repeat(us_[-1:], nb - n, axis=0)])
+        us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
     # a new process runs the stored exported program where exactly equivalent (concrete arguments)
     out = cached_call(_stroke_program, (mech, options, bool(derivs), single), (us_, pf, gf))
     if not traced:
@@ -444,7 +451,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     return sol, d1, d2
 
 
-def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int | None = None, throw: bool = False) -> Solution:
+def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), throw: bool = False) -> Solution:
     """Solve a whole stroke by continuation, for one design or a batch of designs.
 
     **Arguments**
@@ -455,13 +462,12 @@ def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptio
       continuation then keeps (``BRANCH`` status where only the other branch closes).
     - `options`: ``SolverOptions`` (``options.anchors``: how many points are solved in
       sequence; more anchors are safer near toggles and slower).
-    - `anchors`: shorthand for ``options.anchors``.
     - `throw`: raise ``RuntimeError`` if any sample did not converge.
 
     **Returns** a ``Solution`` with shape ``(N, ...)`` for one design, ``(D, N, ...)`` for D;
     differentiable in ``us`` and ``p`` by the implicit function theorem.
     """
-    sol, _, _ = stroke(mech, us, p, guess, options, derivs=False, anchors=anchors)
+    sol, _, _ = stroke(mech, us, p, guess, options, derivs=False)
     if throw:
         raise_if_failed(sol)
     return sol

@@ -32,6 +32,7 @@ import optax
 
 from .scenes.base import Scene
 from .options import SolverOptions
+from .scenes.evaluation import SCENE_OPTIONS
 from .status import Status
 from .sweep import design_columns
 from .xla import jit
@@ -124,8 +125,7 @@ class SceneFigure:
     reduce: Callable
     points: int = 101
     fixed: tuple = ()
-    options: SolverOptions = SolverOptions()
-    anchors: int = 256
+    options: SolverOptions = SCENE_OPTIONS
     name: str = "f"
 
     def __call__(self, p: Mapping):
@@ -135,7 +135,7 @@ class SceneFigure:
         fixed = dict(self.fixed)
         dtype = jnp.result_type(*[jnp.asarray(v) for v in p.values()], float)
         full = {k: jnp.asarray(p[k] if k in p else fixed.get(k, v), dtype) for k, v in self.scene.defaults.items()}
-        cols, status = design_columns(self.scene, self.points, full, options=self.options, anchors=self.anchors)
+        cols, status = design_columns(self.scene, self.points, full, options=self.options)
         ok = jnp.all(status == Status.CONVERGED)
         cols = {k: jnp.where(jnp.isfinite(v), v, 0.0) for k, v in cols.items()}
         value = jnp.asarray(self.reduce(cols, full))
@@ -151,8 +151,7 @@ def scene_figure(
     *,
     points: int = 101,
     fixed: Mapping[str, float] | None = None,
-    options: SolverOptions = SolverOptions(),
-    anchors: int = 256,
+    options: SolverOptions = SCENE_OPTIONS,
     name: str | None = None,
 ) -> SceneFigure:
     """A figure of merit from a scene: a reduction of its table over the stroke.
@@ -187,7 +186,7 @@ def scene_figure(
     if name is None:
         name = getattr(reduce, "__name__", "f")
         name = "f" if name == "<lambda>" else name
-    return SceneFigure(scene, reduce, int(points), tuple(sorted((k, float(v)) for k, v in fixed.items())), options, int(anchors), name)
+    return SceneFigure(scene, reduce, int(points), tuple(sorted((k, float(v)) for k, v in fixed.items())), options, name)
 
 
 def _split(out):

@@ -11,7 +11,8 @@ The stored program is used only where it is exactly what the jitted function wou
 - every argument is concrete (no tracer: under ``jax.grad``, ``jit`` or ``vmap`` the normal
   path runs, so custom derivative rules, which an exported program loses, are never needed);
 - the key holds everything that determines the program: the function's name, its static
-  arguments (a ``Mechanism`` by its traced-program fingerprint, options and flags by value,
+  arguments (a ``Mechanism`` by its traced-program fingerprint, a registry scene by its name,
+  options and flags by value,
   pytree structures whose node types are jaxmech's or Python's own), the structure, shapes,
   dtypes and weak types of the arguments, the JAX flags that change tracing (x64, promotion
   and precision defaults), the backend, the jax and jaxlib versions, and a hash of every
@@ -90,9 +91,9 @@ def static_token(x):
 
     if x is None or isinstance(x, (bool, int, float, str)):
         return repr(x)
-    if isinstance(x, Mechanism):
+    if isinstance(x, Mechanism) or hasattr(type(x), "program_key"):  # a mechanism, a scene
         key = x.program_key
-        return None if key is None else f"Mechanism({key})"
+        return None if key is None else f"{type(x).__name__}({key})"
     if isinstance(x, tuple):
         parts = [static_token(v) for v in x]
         return None if any(v is None for v in parts) else "(" + ",".join(parts) + ")"

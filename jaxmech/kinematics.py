@@ -228,7 +228,6 @@ def motion(
     *,
     points: Sequence[str] | None = None,
     options: SolverOptions = SolverOptions(),
-    anchors: int | None = None,
 ) -> Motion:
     """Positions, velocities and accelerations along a drive law ``u(t)`` (one design).
 
@@ -251,7 +250,7 @@ def motion(
             raise ValueError(f"{mech.name}: unknown point {n!r}; defined points: {list(mech.points)}")
     us = jax.vmap(drive)(t)
     # one compiled pass gives positions and dq/du, d2q/du2; the drive's chain rule follows
-    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, anchors=anchors)
+    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True)
     pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
     u, ud, udd, q, qd, qdd, d1, d2, pts = _motion_eval(mech, point_names, drive, pj, t.astype(sol.q.dtype), sol.q, e1, e2)
     return Motion(
@@ -260,7 +259,7 @@ def motion(
     )
 
 
-def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), anchors: int | None = None):
+def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions()):
     """Positions and per-unit-input derivatives over a stroke ``us``, for one design or a
     batch of designs (``p`` leaves of shape ``(D,)``), in one compiled pass.
 
@@ -268,4 +267,4 @@ def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: Solver
     where the status is not ``CONVERGED``.  The derivatives are those of ``input_derivatives``
     (differentiable again in ``u`` and ``p``), computed together with the solve.
     """
-    return stroke(mech, us, p, guess, options, derivs=True, anchors=anchors)
+    return stroke(mech, us, p, guess, options, derivs=True)

@@ -196,7 +196,7 @@ def test_branch_is_kept_along_stroke_and_checked():
     th = np.linspace(0, 2 * np.pi, 2001)
     for sign in (1.0, -1.0):
         t3, t4 = fourbar_closed(0.0, **p, sign=sign)
-        sol = jm.solve_stroke(FB, th, p, jnp.array([t3, t4]), anchors=64)
+        sol = jm.solve_stroke(FB, th, p, jnp.array([t3, t4]), options=jm.SolverOptions(anchors=64))
         assert np.all(np.asarray(sol.ok))
         assert np.all(np.sign(np.asarray(sol.branch)) == sign)
         c3, c4 = fourbar_closed(th, **p, sign=sign)

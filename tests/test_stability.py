@@ -84,7 +84,7 @@ def test_change_point_fourbar_does_not_switch_branch():
     th = np.linspace(1.0, 0.0, 401)
     for sign in (1.0, -1.0):
         t3, t4 = fourbar_closed(1.0, **p, sign=sign)
-        sol = jm.solve_stroke(FB, th, p, jnp.array([t3, t4]), anchors=64)
+        sol = jm.solve_stroke(FB, th, p, jnp.array([t3, t4]), options=jm.SolverOptions(anchors=64))
         st = assert_honest(sol, th, p, sign=sign, tol=1e-6)
         assert np.all(st[:-20] == S.CONVERGED)
         assert st[-1] != S.CONVERGED  # exactly at the change point: singular, never a guess
@@ -124,7 +124,7 @@ def test_large_stroke_steps_do_not_flip_branch_silently():
         assert np.all(fourbar_feasible(th, **p)[0])
         for sign in (1.0, -1.0):
             t3, t4 = fourbar_closed(0.0, **p, sign=sign)
-            sol = jm.solve_stroke(FB, th, p, jnp.array([t3, t4]), anchors=4)
+            sol = jm.solve_stroke(FB, th, p, jnp.array([t3, t4]), options=jm.SolverOptions(anchors=4))
             st = assert_honest(sol, th, p, sign=sign)
             assert np.all(np.isin(st, [S.CONVERGED, S.BRANCH]))
             assert np.mean(st == S.CONVERGED) > 0.5

@@ -114,7 +114,7 @@ def _id_drive_static(model, quasi_static, drive, p, t, q, d1, d2):
 
 
 def inverse_dynamics(model: Model, drive, t, p: Mapping, guess, *, quasi_static: bool = False,
-                     options: SolverOptions = SolverOptions(), anchors: int | None = None) -> InverseDynamics:
+                     options: SolverOptions = SolverOptions()) -> InverseDynamics:
     """Driving force/torque and reactions along a drive law ``u(t)`` (one design).
 
     **Arguments**
@@ -136,7 +136,7 @@ def inverse_dynamics(model: Model, drive, t, p: Mapping, guess, *, quasi_static:
     us = jax.vmap(drive)(t)
     model.check_params(p)
     # positions, dq/du and d2q/du2 in one compiled pass; the drive's chain rule gives the rates
-    sol, d1, d2 = stroke(model.mechanism, us, mechanism_params(model, p), guess, options, derivs=True, anchors=anchors)
+    sol, d1, d2 = stroke(model.mechanism, us, mechanism_params(model, p), guess, options, derivs=True)
     dtype = sol.q.dtype
     pj = prepare_params(model, p, dtype)
     tt = t.astype(dtype)

@@ -5,19 +5,18 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import functools
-import weakref
 from collections.abc import Callable, Mapping
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..kinematics import ConstantSpeed, Motion, motion
+from ..kinematics import Motion
 from ..mechanism import Mechanism
 from ..status import Status, status_counts
 from ..units import for_reading
-from ..xla import jit
-from .columns import table_columns
+from .columns import mask_failed, table_columns
+from .evaluation import evaluate
 
 __all__ = ["Scene", "SceneResult", "run_scene"]
 
@@ -70,6 +69,15 @@ class Scene:
                     f"scene {self.name!r}: parameters must describe exactly the defaults; "
                     f"undescribed {missing}, not a default {extra}"
                 )
+
+    @property
+    def program_key(self) -> str | None:
+        """What identifies this scene in a stored program: its registry name when it is the
+        registry's scene of that name (its code is the package's, which the stored programs'
+        key covers); None for any other scene (then nothing is stored for it)."""
+        from . import get_scene, scene_names  # the registry imports this module
+
+        return f"scene {self.name}" if self.name in scene_names() and get_scene(self.name) is self else None
 
     def check_name(self, name: str) -> None:
         """``ValueError`` (one line, naming the closest valid name) unless ``name`` is a
@@ -131,8 +139,10 @@ class SceneResult:
     def table(self) -> dict[str, np.ndarray]:
         """Columns ``NAME[UNIT]`` (SI): input, every coordinate with ``_dot``/``_ddot``, outputs
         (``columns.table_columns``, as a sweep writes them), and ``status[-]``."""
-        cols = {k: np.asarray(v) for k, v in table_columns(self.scene, self.motion, self.outputs, xp=np).items()}
-        cols["status[-]"] = np.asarray(self.motion.status)
+        status = np.asarray(self.motion.status)
+        cols = mask_failed(self.scene, table_columns(self.scene, self.motion, self.outputs, xp=np), status, xp=np)
+        cols = {k: np.asarray(v) for k, v in cols.items()}
+        cols["status[-]"] = status
         return cols
 
     def summary(self) -> str:
@@ -161,15 +171,27 @@ class SceneResult:
 def run_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
     """Run a scene over its stroke at ``points`` evenly spaced inputs (both ends included),
     under its default constant-speed drive.  Raises ``ValueError`` for bad parameters or a
-    design that cannot be assembled over the stroke."""
+    design that cannot be assembled over the stroke.
+
+    The stroke is solved with ``evaluation.SCENE_OPTIONS`` by ``evaluation.evaluate``, the
+    program a sweep runs: ``run_scene`` and a one-design sweep give the same columns, bit
+    for bit.  (It runs two copies of the design: XLA compiles a batch of one as scalar code
+    whose last-bit rounding differs, and a sweep's chunk holds at least two.)"""
     if points < 2:
         raise ValueError(f"points must be at least 2, got {points}")
     p = scene.params(**overrides)
-    u0, u1 = (float(x) for x in scene.stroke(p))
-    w = scene.speed if u1 >= u0 else -scene.speed
-    t = jnp.linspace(0.0, (u1 - u0) / w, points)
-    mo = motion(scene.mechanism, ConstantSpeed(jnp.asarray(u0), jnp.asarray(w)), t, p, jnp.asarray(scene.guess(p)))
-    status = np.asarray(mo.status)
+    dtype = jnp.result_type(float)
+    batch = {k: np.full(2, v, dtype) for k, v in p.items()}
+    mo2, outs2 = evaluate(scene, int(points), batch)
+    status = np.asarray(mo2.status)[0]
+    ok = status == Status.CONVERGED
+    mo = jax.tree_util.tree_map(lambda x: np.asarray(x)[0], mo2)
+    # failed samples: NaN in every field but the drive's (the program holds placeholders there)
+    nan = lambda x: np.where(ok.reshape(ok.shape + (1,) * (x.ndim - 1)), x, np.nan)  # noqa: E731
+    mo = dataclasses.replace(
+        mo, q=nan(mo.q), q_dot=nan(mo.q_dot), q_ddot=nan(mo.q_ddot), dq_du=nan(mo.dq_du), d2q_du2=nan(mo.d2q_du2),
+        points=jax.tree_util.tree_map(nan, mo.points),
+    )
     if np.any(status == Status.INFEASIBLE) or np.any(status == Status.NONFINITE):
         bad = np.flatnonzero((status == Status.INFEASIBLE) | (status == Status.NONFINITE))
         uname = scene.mechanism.inputs[0]
@@ -178,26 +200,8 @@ def run_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
             f"{len(bad)} of {points} positions fail, first at {uname} = {float(mo.u[bad[0], 0]):.6g} "
             f"{scene.units[uname]} ({status_counts(status)}); change the link lengths or the stroke"
         )
-    return SceneResult(scene=scene, params=p, motion=mo, outputs=_scene_outputs(scene, p, mo))
-
-
-# A scene's units per output, noted when its outputs are traced (a unit is not an array).
-_UNITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-@functools.partial(jit, static_argnums=0)
-def _output_values(scene: Scene, p, mo: Motion):
-    outs = scene.outputs(p, mo)
-    _UNITS[scene] = {k: unit for k, (_, unit) in outs.items()}
-    return {k: v for k, (v, _) in outs.items()}
-
-
-def _scene_outputs(scene: Scene, p, mo: Motion) -> dict:
-    """``scene.outputs(p, mo)`` as one compiled program: run eagerly, its few dozen array
-    operations would each compile a program of their own (10-30 ms apiece, ~1 s for
-    flap_msd).  A scene is static here by identity (``Scene`` compares by identity)."""
-    if scene.outputs is None:
-        return {}
-    values = _output_values(scene, p, mo)
-    units = _UNITS[scene]
-    return {k: (values[k], units[k]) for k in units}
+    if outs2 is None:  # outputs that do not trace: evaluated here, on this design's motion
+        outs = {k: (np.asarray(v), unit) for k, (v, unit) in scene.outputs(p, mo).items()}
+    else:
+        outs = {k: (np.asarray(v)[0], unit) for k, (v, unit) in outs2.items()}
+    return SceneResult(scene=scene, params=p, motion=mo, outputs=outs)

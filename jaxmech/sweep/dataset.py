@@ -114,7 +114,7 @@ class Dataset:
                            names=tuple(data.columns), lost=lost)
 
 
-def manifest_of(scene, params: dict, *, figures, points: int, options, anchors: int, x64: bool) -> dict:
+def manifest_of(scene, params: dict, *, figures, points: int, options, x64: bool) -> dict:
     """The arguments that make a sweep's rows: a rerun resumes only when they are equal."""
     digest = hashlib.sha256()
     for k, v in params.items():
@@ -127,7 +127,7 @@ def manifest_of(scene, params: dict, *, figures, points: int, options, anchors: 
     }
     return {
         "format": FORMAT, "scene": scene.name, "mode": "trace" if figures is None else "figures", "figures": fig,
-        "points": int(points), "options": repr(options), "anchors": int(anchors), "float64": bool(x64),
+        "points": int(points), "options": repr(options), "float64": bool(x64),
         "designs": len(next(iter(params.values()))), "parameters": list(params), "parameters_sha256": digest.hexdigest(),
     }
 

@@ -13,15 +13,15 @@ from collections.abc import Callable, Mapping, Sequence
 import jax
 import jax.numpy as jnp
 
-from ..continuation import stroke
-from ..kinematics import ConstantSpeed, Motion, sample_kinematics
+from ..options import SolverOptions
 from ..scenes.base import Scene
 from ..scenes.columns import is_drive_column, mask_failed, table_columns
-from ..options import SolverOptions
+from ..scenes.evaluation import SCENE_OPTIONS, motion_and_outputs, output_units, scene_motion
 from ..status import Status
 
 __all__ = [
     "Figures",
+    "batch_columns",
     "design_columns",
     "design_motion",
     "design_status",
@@ -32,64 +32,41 @@ __all__ = [
 ]
 
 
-def stroke_drive(scene: Scene, p, dtype):
-    """Drive law of ``run_scene``: constant speed from the stroke start to its end;
-    returns ``(drive, duration in s)``."""
-    u0, u1 = (jnp.asarray(x, dtype) for x in scene.stroke(p))
-    w = jnp.where(u1 >= u0, scene.speed, -scene.speed).astype(dtype)
-    return ConstantSpeed(u0, w), (u1 - u0) / w
-
-
-def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
-    """One design's ``Motion`` over its stroke, traceable (works under ``jit``/``vmap``/``grad``).
-
-    The same computation as ``run_scene`` (its stroke, drive and continuation), but the
-    values at failed samples are finite placeholders (the coordinates of
-    ``scene.guess(p)``, zero derivatives), so that any function of the motion stays
-    finite and differentiable; ``status`` says which samples are real.
+def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = SCENE_OPTIONS):
+    """One design's ``Motion`` over its stroke, traceable (works under ``jit``/``vmap``/``grad``):
+    ``scenes.evaluation.scene_motion`` for a batch of one.
 
     **Arguments**
 
     - `scene`: the scene; `points`: samples along the stroke (both ends included).
     - `p`: ``{name: scalar}``, every parameter of the scene (SI units).
 
-    **Returns** ``(motion, ok)``: a ``Motion`` with ``N = points`` samples and the boolean
-    ``(N,)`` mask of converged samples.
+    **Returns** ``(motion, ok)``: a ``Motion`` with ``N = points`` samples (finite
+    placeholders at failed samples, as ``scene_motion`` says) and the boolean ``(N,)`` mask
+    of converged samples.
     """
-    mech = scene.mechanism
-    dtype = jnp.result_type(*[jnp.asarray(v) for v in p.values()], float)
-    p = {k: jnp.asarray(p[k], dtype) for k in mech.params}
-    drive, duration = stroke_drive(scene, p, dtype)
-    t = jnp.linspace(0.0, duration, points)
-    us = jax.vmap(drive)(t)
-    guess = jnp.asarray(scene.guess(p), dtype)
-    # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
-    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, anchors=anchors)
-    ok = sol.status == Status.CONVERGED
-    # Mask the *inputs* of everything downstream: no NaN, not even in a branch not taken
-    # (failed samples have zero derivatives).
-    q = jnp.where(ok[:, None], sol.q, guess[None, :])
-    d1 = jnp.where(ok[:, None, None], e1, 0.0)
-    d2 = jnp.where(ok[:, None, None, None], e2, 0.0)
-    u, ud, udd, qd, qdd, pts = jax.vmap(lambda t_, q_, a_, b_: sample_kinematics(mech, tuple(mech.points), drive, p, t_, q_, a_, b_))(t, q, d1, d2)
-    mo = Motion(
-        t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
-        points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,
-    )
-    return mo, ok
+    mo, ok = scene_motion(scene, points, {k: jnp.asarray(v)[None] for k, v in p.items()}, options)
+    return jax.tree_util.tree_map(lambda x: x[0], mo), ok[0]
 
 
-def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SolverOptions(), anchors: int = 256):
+def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SCENE_OPTIONS):
     """One design's table columns, traceable: ``({NAME[UNIT]: (N,)}, status (N,))``.
 
     Columns are those of ``SceneResult.table`` (without ``status[-]``), and at failed
     samples they hold finite placeholders (see ``design_motion``): mask them with the
-    status.  Used by the sweep kernels and by ``jaxmech.design.scene_figure``.
+    status.  Used by ``jaxmech.design.scene_figure``.
     """
-    mo, _ = design_motion(scene, points, p, options=options, anchors=anchors)
-    p = {k: jnp.asarray(v, mo.q.dtype) for k, v in p.items()}
-    outs = scene.outputs(p, mo) if scene.outputs is not None else None
-    return table_columns(scene, mo, outs), mo.status
+    cols, status = batch_columns(scene, points, {k: jnp.asarray(v)[None] for k, v in p.items()}, options)
+    return {k: v[0] for k, v in cols.items()}, status[0]
+
+
+def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+    """The table columns of D designs (``p`` leaves ``(D,)``), traceable: ``({NAME[UNIT]:
+    (D, N)}, status (D, N))``, unmasked (finite placeholders at failed samples), from
+    ``motion_and_outputs``: the sweep kernels' columns, and ``run_scene``'s."""
+    mo, values = motion_and_outputs(scene, points, options, scene.outputs is not None, p)
+    units = output_units(scene, points, options, p) if values else {}
+    return table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}), mo.status
 
 
 def design_status(status, xp=jnp):

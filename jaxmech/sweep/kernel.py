@@ -20,17 +20,18 @@ from ..scenes.base import Scene
 from ..options import SolverOptions
 from ..status import Status
 from .designs import reject
-from .evaluate import Figures, design_columns, design_motion, mask_failed, stroke_figures, table_columns
+from ..scenes.evaluation import motion_and_outputs, output_units, scene_motion
 from ..xla import jit
+from .evaluate import Figures, batch_columns, mask_failed, stroke_figures, table_columns
 
-__all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
+__all__ = ["ChunkData", "Job", "trace_columns", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
 
 
 @dataclasses.dataclass(frozen=True)
 class Job:
     """What every chunk of one sweep runs; static (hashable), part of the kernel's identity.
 
-    - `points`: samples along each stroke; `options`, `anchors`: solver settings.
+    - `points`: samples along each stroke; `options`: solver settings.
     - `figures`: ``None`` (trace mode: every table column at every sample) or the
       ``Figures`` reduced over the stroke inside the kernel.
     - `chunk`: designs per compiled call; `outputs`: ``"vmap"`` (the scene's outputs are
@@ -40,7 +41,6 @@ class Job:
 
     points: int
     options: SolverOptions
-    anchors: int
     figures: Figures | None
     chunk: int
     outputs: str = "vmap"
@@ -71,21 +71,30 @@ class ChunkData:
 _COLUMN_ORDER: dict = {}
 
 
-def _one_design(scene: Scene, job: Job, p1):
-    cols, status = design_columns(scene, job.points, p1, options=job.options, anchors=job.anchors)
+def _chunk(scene: Scene, job: Job, p):
+    """A chunk of designs (``p`` leaves ``(chunk,)``).  Trace mode: ``motion_and_outputs``
+    itself, the program ``run_scene`` runs (the columns are cut from it on the host, so a
+    design's columns are ``run_scene``'s bit for bit); figures mode: the figures ``(chunk,)``
+    and the status, reduced in the kernel; the motion alone where outputs are per design."""
+    if job.outputs != "vmap":
+        return scene_motion(scene, job.points, p, job.options)[0]
     if job.figures is None:
-        _COLUMN_ORDER[(scene.name, None)] = list(cols)
-        return mask_failed(scene, cols, status), status
-    figs = stroke_figures(scene, job.figures, cols, status, p1)
+        return motion_and_outputs(scene, job.points, job.options, scene.outputs is not None, p)
+    cols, status = batch_columns(scene, job.points, p, job.options)
+    figs = jax.vmap(lambda c, s, p1: stroke_figures(scene, job.figures, c, s, p1))(cols, status, p)
     status = figs.pop("status[-]")
     _COLUMN_ORDER[(scene.name, job.figures)] = list(figs)
     return figs, status
 
 
-def _kernel(scene: Scene, job: Job, p):
-    if job.outputs == "vmap":
-        return jax.vmap(lambda p1: _one_design(scene, job, p1))(p)
-    return jax.vmap(lambda p1: design_motion(scene, job.points, p1, options=job.options, anchors=job.anchors)[0])(p)
+def trace_columns(scene: Scene, job: Job, mo, values, p) -> tuple[dict, np.ndarray]:
+    """Masked columns ``{NAME[UNIT]: (n, N)}`` and status ``(n, N)`` (host numpy) from the
+    trace-mode kernel's motion and output values, as ``SceneResult.table`` cuts them."""
+    units = output_units(scene, job.points, job.options, p) if values else {}
+    status = np.asarray(mo.status)
+    cols = table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}, xp=np)
+    cols = mask_failed(scene, cols, status, np)
+    return {k: np.array(v) for k, v in cols.items()}, status.copy()
 
 
 def in_scene_order(scene: Scene, figures, cols: dict) -> dict:
@@ -101,7 +110,7 @@ def outputs_mode(scene: Scene, job: Job, param_names) -> str:
     (traces one design; records the column order on the way)."""
     try:
         jax.eval_shape(
-            lambda p: jax.vmap(lambda p1: _one_design(scene, job, p1))(p),
+            lambda p: _chunk(scene, job, p),
             {k: jax.ShapeDtypeStruct((1,), jnp.result_type(float)) for k in param_names},
         )
     except jax.errors.JAXTypeError:
@@ -113,7 +122,7 @@ def bytes_per_design_estimate(scene: Scene, job: Job, param_names) -> float:
     """Host bytes of one design's motion, times 16 for the kernel's temporaries: a budget
     estimate where the kernel is compiled elsewhere (on Dask workers)."""
     one = jax.eval_shape(
-        lambda p: jax.vmap(lambda p1: design_motion(scene, job.points, p1, options=job.options, anchors=job.anchors)[0])(p),
+        lambda p: scene_motion(scene, job.points, p, job.options)[0],
         {k: jax.ShapeDtypeStruct((1,), jnp.result_type(float)) for k in param_names},
     )
     return 16.0 * sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(one))
@@ -138,7 +147,7 @@ def compiled_kernel(scene: Scene, job: Job, param_names):
         return hit, sharding
     dtype = jnp.result_type(float)
     spec = {k: jax.ShapeDtypeStruct((job.chunk,), dtype, sharding=sharding) for k in param_names}
-    jitted = jit(lambda p: _kernel(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
+    jitted = jit(lambda p: _chunk(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
     compiled = jitted.lower(spec).compile()
     if len(_COMPILED) > 32:
         _COMPILED.clear()
@@ -248,6 +257,9 @@ def _run_kernel(scene: Scene, job: Job, params: dict[str, np.ndarray]):
     dtype = jnp.result_type(float)
     padded = {k: np.concatenate([v, np.full(chunk - n, v[0])]).astype(dtype) for k, v in params.items()}
     out = compiled({k: jax.device_put(v, sharding) for k, v in padded.items()})
+    if job.outputs == "vmap" and job.figures is None:
+        mo, values = jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], out)
+        return trace_columns(scene, job, mo, values, {k: v[:n] for k, v in padded.items()})
     if job.outputs == "vmap":
         cols, status = out
         cols = {k: np.asarray(v)[:n].copy() for k, v in cols.items()}  # writable host copies

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..scenes.base import Scene
 from ..options import SolverOptions
+from ..scenes.evaluation import SCENE_OPTIONS
 from ..status import Status
 from .dataset import ChunkReport, Dataset, manifest_of, open_dataset, write_manifest, written_counts
 from .designs import design_table
@@ -193,8 +194,7 @@ def sweep_scene(
     memory_budget: float | None = None,
     progress: bool | None = None,
     client=None,
-    options: SolverOptions = SolverOptions(),
-    anchors: int = 256,
+    options: SolverOptions = SCENE_OPTIONS,
     timeout: float | None = None,
 ) -> SweepResult:
     """Run a scene for a batch of designs, each over its whole stroke, in one call; every
@@ -225,7 +225,8 @@ def sweep_scene(
       same kernel, with float64 enabled when it is enabled here).  A chunk whose task
       fails or exceeds `timeout` stops nothing else: its designs are kept with status
       ``NONFINITE`` and the reason in ``errors``.
-    - `options`, `anchors`: solver settings, as for ``solve_stroke``.
+    - `options`: solver settings, as for ``solve_stroke`` (default ``SCENE_OPTIONS``: 256
+      anchors, as ``run_scene``).
     - `timeout`: seconds to wait for the Dask tasks (``None``: no limit).
 
     **Returns** a ``SweepResult``.
@@ -239,7 +240,7 @@ def sweep_scene(
     d = len(next(iter(params.values())))
     names = tuple(params)
     t0 = time.perf_counter()
-    job = Job(points=points, options=options, anchors=anchors, figures=None, chunk=0)
+    job = Job(points=points, options=options, figures=None, chunk=0)
     if client is None:
         job, per = plan_chunk(scene, job, names, d, chunk_size, budget)
         devices, chunks = jax.device_count(), None
@@ -291,8 +292,7 @@ def sweep_dataset(
     memory_budget: float | None = None,
     progress: bool | None = None,
     client=None,
-    options: SolverOptions = SolverOptions(),
-    anchors: int = 256,
+    options: SolverOptions = SCENE_OPTIONS,
     timeout: float | None = None,
 ) -> SweepSummary:
     """Run a sweep of any size in bounded memory, streaming it to a Parquet dataset.
@@ -328,10 +328,10 @@ def sweep_dataset(
     d = len(next(iter(params.values())))
     names = tuple(params)
     t0 = time.perf_counter()
-    manifest = manifest_of(scene, params, figures=figures, points=points, options=options, anchors=anchors,
+    manifest = manifest_of(scene, params, figures=figures, points=points, options=options,
                            x64=bool(jax.config.jax_enable_x64))
     chunk, done, lost_before = open_dataset(out, manifest, chunk_size)
-    job = Job(points=points, options=options, anchors=anchors, figures=figures, chunk=chunk or 0)
+    job = Job(points=points, options=options, figures=figures, chunk=chunk or 0)
     devices = jax.device_count()
     if chunk is not None and all(s in done for s in range(0, d, chunk)):
         pass  # finished earlier: nothing to compile

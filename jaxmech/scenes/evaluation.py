@@ -1,0 +1,146 @@
+"""A scene over its stroke for a batch of designs: the one evaluation that ``run_scene``,
+the sweeps, ``jaxmech.design`` and the live view share.
+
+``scene_motion`` (traceable) gives every design's ``Motion`` over its own stroke under the
+scene's constant-speed drive, with finite placeholders at failed samples; ``scene_outputs``
+adds the scene's outputs.  ``evaluate`` runs both as one compiled program for concrete
+parameters (the path of ``run_scene`` and of a one-design sweep, so their columns agree bit
+for bit), stored as an exported program for the next process where the scene is one of the
+registry's.
+"""
+
+from __future__ import annotations
+
+import functools
+import weakref
+
+import jax
+import jax.numpy as jnp
+
+from ..continuation import stroke
+from ..exported import cached_call
+from ..kinematics import ConstantSpeed, Motion, sample_kinematics
+from ..linalg import where
+from ..options import SolverOptions
+from ..status import Status
+from ..xla import jit
+
+__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "scene_outputs", "motion_and_outputs", "output_units", "evaluate"]
+
+#: Solver options of a scene's stroke wherever it is evaluated (``run_scene``, sweeps,
+#: design, the live view) unless the caller gives its own: 256 anchors.
+SCENE_OPTIONS = SolverOptions(anchors=256)
+
+
+def stroke_drive(scene, p, dtype):
+    """One design's drive: constant speed ``scene.speed`` from the stroke start to its end;
+    returns ``(drive, duration in s)``."""
+    u0, u1 = (jnp.asarray(x, dtype) for x in scene.stroke(p))
+    w = jnp.where(u1 >= u0, scene.speed, -scene.speed).astype(dtype)
+    return ConstantSpeed(u0, w), (u1 - u0) / w
+
+
+def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+    """Every design's ``Motion`` over its stroke, traceable (``jit``/``vmap``/``grad``).
+
+    **Arguments**
+
+    - `scene`: the scene; `points`: samples along each stroke (both ends included).
+    - `p`: ``{name: (D,)}``, every parameter of the scene for D designs (SI units).
+
+    **Returns** ``(motion, ok)``: a ``Motion`` with ``(D, points)`` in front, and the boolean
+    ``(D, points)`` mask of converged samples.  At failed samples the values are finite
+    placeholders (the coordinates of ``scene.guess(p)``, zero derivatives), so that any
+    function of the motion stays finite and differentiable; ``status`` says which samples are
+    real.  The strokes of all designs are solved by one continuation (``per_design``
+    strokes), not one per design under ``vmap``.
+    """
+    mech = scene.mechanism
+    dtype = jnp.result_type(*[jnp.asarray(v) for v in p.values()], float)
+    p = {k: jnp.asarray(p[k], dtype) for k in mech.params}
+
+    def setup(p1):
+        drive, duration = stroke_drive(scene, p1, dtype)
+        t = jnp.linspace(0.0, duration, points)
+        us = jnp.reshape(jax.vmap(drive)(t), (points, mech.dof))
+        return drive, t, us, jnp.asarray(scene.guess(p1), dtype)
+
+    drive, t, us, guess = jax.vmap(setup)(p)
+    # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
+    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, per_design=True)
+    ok = sol.status == Status.CONVERGED
+    # Mask the *inputs* of everything downstream: no NaN, not even in a branch not taken
+    # (failed samples have zero derivatives).
+    q = where(ok[..., None], sol.q, guess[:, None, :])
+    d1 = where(ok[..., None, None], e1, 0.0)
+    d2 = where(ok[..., None, None, None], e2, 0.0)
+    names = tuple(mech.points)
+
+    def per_design(drive1, p1, t1, q1, a1, b1):
+        return jax.vmap(lambda t_, q_, a_, b_: sample_kinematics(mech, names, drive1, p1, t_, q_, a_, b_))(t1, q1, a1, b1)
+
+    u, ud, udd, qd, qdd, pts = jax.vmap(per_design)(drive, p, t, q, d1, d2)
+    mo = Motion(
+        t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
+        points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,
+    )
+    return mo, ok
+
+
+def scene_outputs(scene, p, mo: Motion) -> dict:
+    """The scene's outputs for every design of a ``scene_motion``: ``{name: (values (D, N),
+    unit)}`` in the scene's order (``scene.outputs`` is written for one design: it is
+    vmapped here); ``{}`` for a scene without outputs."""
+    if scene.outputs is None:
+        return {}
+    units: dict = {}
+
+    def one(p1, mo1):
+        outs = scene.outputs(p1, mo1)
+        units.update((k, unit) for k, (_, unit) in outs.items())
+        return {k: jnp.broadcast_to(jnp.asarray(v), mo1.t.shape) for k, (v, _) in outs.items()}
+
+    p = {k: jnp.asarray(v, mo.q.dtype) for k, v in p.items()}
+    values = jax.vmap(one)(p, mo)
+    return {k: (values[k], unit) for k, unit in units.items()}
+
+
+# A scene's units per output, in its order, noted when its program is traced (a unit is not
+# an array); a process that loads the stored program traces the outputs' shapes instead.
+_UNITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
+def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p):
+    """``(motion, {output name: values (D, N)})`` of ``scene_motion`` and ``scene_outputs``
+    as one jitted function (the outputs' units: ``output_units``); ``{}`` without outputs.
+    ``evaluate`` compiles it on its own, the sweep kernels inside theirs: the same
+    computation, so a design's columns do not depend on the path."""
+    mo, _ = scene_motion(scene, points, p, options)
+    if not with_outputs:
+        return mo, {}
+    outs = scene_outputs(scene, p, mo)
+    _UNITS[scene] = {k: unit for k, (_, unit) in outs.items()}
+    return mo, {k: v for k, (v, _) in outs.items()}
+
+
+def output_units(scene, points: int, options: SolverOptions, p) -> dict:
+    """``{output name: unit}`` in the scene's order (traced once per scene and process,
+    shapes only, where ``motion_and_outputs`` was not traced in this process)."""
+    if scene not in _UNITS:
+        jax.eval_shape(functools.partial(motion_and_outputs, scene, points, options, True), p)
+    return _UNITS[scene]
+
+
+def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+    """``(motion, outputs)`` of D designs with concrete parameters ``p`` (``{name: (D,)}``):
+    ``scene_motion`` and ``scene_outputs`` as one compiled program.  Outputs that do not
+    trace (``scene.outputs`` converting values to numpy) are evaluated design by design on
+    the host instead: ``outputs`` is then ``None`` and the caller evaluates them."""
+    try:
+        mo, values = cached_call(motion_and_outputs, (scene, int(points), options, True), (p,))
+    except jax.errors.JAXTypeError:
+        mo, _ = cached_call(motion_and_outputs, (scene, int(points), options, False), (p,))
+        return mo, None
+    units = output_units(scene, int(points), options, p) if values else {}
+    return mo, {k: (values[k], unit) for k, unit in units.items()}
