@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -44,7 +45,7 @@ import jaxlib
 from .cache import compile_cache_dir, switched_off
 from .xla import jit
 
-__all__ = ["cached_call", "export_dir", "export_stats", "source_hash", "static_token"]
+__all__ = ["cached_call", "cached_json", "export_dir", "export_stats", "source_hash", "static_token"]
 
 # What ``cached_call`` did, per process: loaded (a stored program was used), exported (one
 # was written), fallback (the normal path ran where a key existed but export failed).
@@ -187,3 +188,26 @@ def cached_call(fn, static: tuple, args: tuple):
             _PROGRAMS[slot] = None
     _STATS["fallback"] += 1
     return fn(*static, *args)
+
+
+def cached_json(label: str, static: tuple, compute):
+    """``compute()`` (a JSON value determined by the static arguments ``static`` and the
+    package's source, e.g. the units of a scene's outputs, which a stored program does not
+    return), kept beside the stored programs so a new process need not trace to know it;
+    ``compute()`` itself when nothing can be stored or read."""
+    folder = export_dir()
+    tokens = [static_token(x) for x in static]
+    if folder is None or any(t is None for t in tokens):
+        return compute()
+    key = hashlib.sha256(repr((label, tokens, source_hash(), jax.__version__)).encode()).hexdigest()
+    path = folder / f"{key}.json"
+    try:
+        return json.loads(path.read_text())
+    except Exception:  # absent or unreadable: compute it and store it
+        pass
+    value = compute()
+    try:
+        _write(path, json.dumps(value).encode())
+    except Exception:  # a read-only cache: computed again next time
+        pass
+    return value

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 from collections.abc import Callable, Mapping, Sequence
 
 import jax
@@ -153,6 +154,15 @@ class Motion:
         if name in self.inputs:
             return self.u[..., self.inputs.index(name)]
         raise KeyError(f"unknown name {name!r}; coordinates {self.coords}, inputs {self.inputs}")
+
+
+# A stored program (``jaxmech.exported``) may return a Motion: its static fields are names.
+jax.export.register_pytree_node_serialization(
+    Motion,
+    serialized_name="jaxmech.Motion",
+    serialize_auxdata=lambda aux: json.dumps(aux).encode(),
+    deserialize_auxdata=lambda data: tuple(tuple(x) for x in json.loads(data)),
+)
 
 
 def chain_rule(d1, d2, u_dot, u_ddot):

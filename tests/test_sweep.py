@@ -21,7 +21,8 @@ from jaxmech.sweep import SweepResult, grid, random_designs, sweep_scene  # noqa
 from helpers import fourbar_closed, fourbar_feasible  # noqa: E402
 
 POINTS = 41
-TABLE_RTOL = 1e-12  # sweep vs run_scene: same arithmetic, two compiled programs
+TABLE_RTOL = 0.0  # sweep vs run_scene: one program (scenes.evaluation), bit for bit
+PROGRAMS_RTOL = 1e-12  # two compiled programs (with and without the outputs traced in)
 CLOSED_TOL = 1e-10  # rad, solver vs closed form
 # a = 0.9..1.1 with b = 3, d = 3.5 needs c >= 0.5 + a to turn fully: c = 1.0 cannot be
 # assembled over part of the stroke, c = 2.5 and 3.0 can.
@@ -57,6 +58,21 @@ def test_random_designs_in_box_and_reproducible():
     np.testing.assert_array_equal(r["c"], r2["c"])
 
 
+@pytest.mark.parametrize("name", ["flap_msd", "sma_flap"])
+def test_one_design_sweep_is_run_scene_bit_for_bit(name):
+    """A scene with outputs (torque, voltage; tensions): ``run_scene`` and a sweep of its
+    one design give the same table, every column equal to the last bit (NaN where failed)."""
+    from jaxmech.scenes import get_scene
+
+    scene = get_scene(name)
+    ref = run_scene(scene, points=POINTS).table()
+    r = sweep_scene(scene, points=POINTS)
+    got = r.table(0)
+    assert list(got) == list(ref)
+    for k in ref:
+        np.testing.assert_array_equal(got[k], ref[k], err_msg=k)
+
+
 def test_grid_matches_run_scene(fourbar_grid):
     r = fourbar_grid
     assert r.n_designs == 9 and r.n_points == POINTS
@@ -68,9 +84,9 @@ def test_grid_matches_run_scene(fourbar_grid):
             continue
         ref = run_scene(FOURBAR, points=POINTS, **r.design(i)).table()
         assert list(ref) == list(r.columns) + ["status[-]"]
-        # the same columns in the same order (scenes.columns.table_columns); the numbers
-        # come from two compiled programs (run_scene's stroke and motion, the sweep's
-        # vmapped kernel) and differ in the last bit (measured: 1 ulp of theta3)
+        # the same columns in the same order (scenes.columns.table_columns), the same
+        # numbers: run_scene runs the sweep's program (two copies of its design) and the
+        # design's result does not depend on its chunk (9 designs here)
         for k in r.columns:
             _assert_same(r.columns[k][i], ref[k], TABLE_RTOL)
         np.testing.assert_array_equal(r.status[i], ref["status[-]"])
@@ -178,7 +194,7 @@ def test_non_vmappable_outputs_and_a_failed_chunk(fourbar_grid):
     # Designs 0-5 (a <= 1.0) run; the chunk with a = 1.1 raises and is lost, nothing else.
     for i in range(6):
         for k in fourbar_grid.columns:
-            _assert_same(r.columns[k][i], fourbar_grid.columns[k][i], TABLE_RTOL)
+            _assert_same(r.columns[k][i], fourbar_grid.columns[k][i], PROGRAMS_RTOL)
     assert sorted(r.errors) == [6, 7, 8] and "RuntimeError" in r.errors[6]
     assert np.all(r.status[6:] == Status.NONFINITE)
     assert "design 6" in r.summary()

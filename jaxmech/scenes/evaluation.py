@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from ..continuation import stroke
-from ..exported import cached_call
+from ..exported import cached_call, cached_json
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
 from ..options import SolverOptions
@@ -75,11 +75,15 @@ def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     d1 = where(ok[..., None, None], e1, 0.0)
     d2 = where(ok[..., None, None, None], e2, 0.0)
     names = tuple(mech.points)
-
-    def per_design(drive1, p1, t1, q1, a1, b1):
-        return jax.vmap(lambda t_, q_, a_, b_: sample_kinematics(mech, names, drive1, p1, t_, q_, a_, b_))(t1, q1, a1, b1)
-
-    u, ud, udd, qd, qdd, pts = jax.vmap(per_design)(drive, p, t, q, d1, d2)
+    d = t.shape[0]
+    # One vmap over designs x samples (the drive and parameters repeated per sample): JAX
+    # batches the kinematics' nested jvps once instead of at two vmap levels.
+    flat = lambda x: jnp.reshape(x, (d * points,) + x.shape[2:])  # noqa: E731
+    rep = lambda x: jnp.repeat(x, points, axis=0)  # noqa: E731
+    kin = jax.vmap(lambda dr, p1, t_, q_, a_, b_: sample_kinematics(mech, names, dr, p1, t_, q_, a_, b_))(
+        jax.tree_util.tree_map(rep, drive), jax.tree_util.tree_map(rep, p), flat(t), flat(q), flat(d1), flat(d2)
+    )
+    u, ud, udd, qd, qdd, pts = jax.tree_util.tree_map(lambda x: jnp.reshape(x, (d, points) + x.shape[1:]), kin)
     mo = Motion(
         t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
         points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,
@@ -125,11 +129,22 @@ def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs:
 
 
 def output_units(scene, points: int, options: SolverOptions, p) -> dict:
-    """``{output name: unit}`` in the scene's order (traced once per scene and process,
-    shapes only, where ``motion_and_outputs`` was not traced in this process)."""
-    if scene not in _UNITS:
-        jax.eval_shape(functools.partial(motion_and_outputs, scene, points, options, True), p)
-    return _UNITS[scene]
+    """``{output name: unit}`` in the scene's order: noted when ``motion_and_outputs`` is
+    traced, and kept beside the stored programs (``exported.cached_json``) for a process
+    that loads the stored program instead; traced (shapes only) where neither has it."""
+    if scene not in _STORED:
+
+        def known():
+            if scene not in _UNITS:
+                jax.eval_shape(functools.partial(motion_and_outputs, scene, points, options, True), p)
+            return list(_UNITS[scene].items())
+
+        _STORED[scene] = dict(cached_json("output units", (scene,), known))
+    return _STORED[scene]
+
+
+# ``output_units``'s answers in this process (read or written once per scene).
+_STORED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
