@@ -20,11 +20,10 @@ import jax
 import jax.numpy as jnp
 
 from .mechanism import Mechanism
-from .continuation import solve_stroke, stroke
+from .continuation import stroke
 from .exported import cached_call
 from .implicit import implicit_root, root_derivatives
 from .options import SolverOptions
-from .solution import Solution
 from .xla import jit
 
 __all__ = [

@@ -8,7 +8,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .linalg import cond1, small_max, small_norm, small_tmatmul, solve_blocks, solve_small, where
+from .linalg import cond1, small_max, small_norm, small_tmatmul, solve_small, where
 from .mechanism import Mechanism
 from .options import SolverOptions, tolerances
 from .status import Status

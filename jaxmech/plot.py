@@ -32,7 +32,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .drawing import animate as animate
-from .drawing import check_point, new_figure, point_positions
+from .drawing import new_figure, point_positions
 from .drawing import draw_mechanism as draw_mechanism
 from .drawing import drawing_spec as drawing_spec
 from .drawing import plot_poses as plot_poses

@@ -27,7 +27,7 @@ from .dataset import ChunkReport, Dataset, manifest_of, open_dataset, write_mani
 from .designs import design_table
 from .evaluate import Figures, design_status
 from .kernel import (
-    ChunkData, Job, bytes_per_design_estimate, default_budget, lost_chunk, outputs_mode, plan_chunk, run_chunk,
+    Job, bytes_per_design_estimate, default_budget, lost_chunk, outputs_mode, plan_chunk, run_chunk,
 )
 from .result import SweepResult
 

@@ -1,65 +1,8 @@
-"""SMA-actuated hinged flap: quasi-static equilibrium (seed 004_52c3b6aed7b0817f).
-
-Source: "Dynamic modelling of sma-driven flap", P. B. Camara Leal, 2016 (a short note, with no
-numbers).  The analysis behind every choice below, with evidence and the chosen parameter set,
-is in ``docs/seeds/sma_flap.md``.  ``tests/seeds/reference_sma_flap.py`` is an independent
-numpy/scipy implementation that the tests compare against.
-
-**Model.**  Rigid flap segments hinged at ``J1`` (wing to segment 1) and ``J2`` (segment 1 to
-segment 2); one hinge locks the two segments into one flap.  Airfoil plane: x aft, y up, SI
-units, complex points.  ``theta_j`` is the rotation of body j relative to body j-1,
-counter-clockwise positive (theta > 0 lifts the trailing edge).  Each hinge carries an SMA wire
-and a linear bias spring.  Each joins a point ``F`` on the body ahead of the hinge to a point
-``A`` on the body behind it, and its tension ``T > 0`` pulls A towards F:
-
-- SMA wire, strain-driven (``jaxmech.actuators.SMAWire``, linear branch or a user constitutive
-  ``law``): ``T = A_w E (L / (L0 (1 + eps)) - 1)``.  ``E = xi E_M + (1 - xi) E_A``,
-  ``eps <= 0`` is the commanded transformation strain, and the wire is slack-clamped at 0.
-- SMA wire, force-driven: ``T = F_j`` prescribed.
-- Bias spring (``jaxmech.actuators.LinearSpring``): ``T = F_pre + k (L - L0)``.
-
-**Equilibrium** (virtual work, i.e. the moment balance about each hinge of everything behind it):
-
-    R_j(theta) = sum_act T dL/dtheta_j + sum_b m_b g dy_cg,b/dtheta_j = 0,   j = 1..n.
-
-``flap_mechanism`` makes these ``n`` equations the constraints of a ``Mechanism``.  Its
-coordinates are the hinge angles and its input is the drive (``eps``, or the wire forces).  So
-``jaxmech.solve`` is Newton on the equilibrium, and every derivative of the equilibrium angles
-(in the drive and in every parameter) comes from the implicit function theorem.  The stiffness
-``dR/dtheta`` is positive definite at a stable equilibrium (output ``stiffness_min``).
-``jaxmech run sma_flap`` sweeps eps from 0 to -4 % on one hinge (``SCENE``).  ``SCENE_CHAIN`` is
-the two-hinge chain.
-
-**Parameters** (``params(n_hinges)``, from docs/seeds/sma_flap.md): a 0.40 m chord section.
-Hinges at x = 0.22 and 0.31 m.  Wires run from (0.06, 0.010) to (0.22, 0.010) m and from
-(0.23, 0.008) to (0.31, 0.008) m: NiTi 0.381 mm, E_M = 28 GPa, E_A = 75 GPa.  Springs run from
-(0.14, -0.010) to (0.22, -0.010) m (k = 1000 N/m, preload 5 N) and from (0.27, -0.008) to
-(0.31, -0.008) m (800 N/m, 3 N).  Masses are 0.06 kg at x = 0.265 m and 0.04 kg at 0.355 m;
-one hinge uses 0.10 kg at 0.301 m.
-
-**The document's fixed point** (Algorithm 1, physics corrected) is ``fixed_point``, with its
-iterate history.  Its rate about the root is ``1 - V''/(k L_s'^2)`` (``fixed_point_rate``).  It
-fails for any realistic wire (rate -20 for E_M, -54 for E_A).  Newton (the engine) converges in
-3-5 steps.
-
-**Corrections to the document** (12 in all, with evidence, in ``docs/seeds/sma_flap.md``):
-
-- Eq. 1.3: a1 for a2.  Eqs. 1.1/1.4: r = x_J + T(theta) a - f (the hinge position is missing).
-- §1.2, eqs. 1.5-1.9: stretching the actuator does not scale its vector.  The only condition is
-  |r(theta)| = eta |r0|, a circle intersection (``rigid_wire_angle``).  Eq. 1.8 has a sign error.
-- §1.3, eqs. 1.11-1.14: a tension pulls A towards F.  The weight torque has the wrong sign.
-  Moments are taken about the hinge, W is the segment's weight at its CG, and a chain's hinge 1
-  carries every segment behind it.
-- Eq. 1.16: F = E_M A eps, not (E_M/A) eps.  The bias spring needs a preload: F = F_pre + k (L - L0).
-- The strain-driven problem is over-determined as written.  The wire is treated here as elastic
-  with a prescribed transformation strain; the rigid limit is ``rigid_wire_angle``.
-- Algorithm 1 diverges for realistic stiffness (see above).  Its bookkeeping is incomplete, and
-  the model is quasi-static, not dynamic.
-"""
+"""The SMA flap's model: parameters, hinge kinematics, wire and spring laws, the
+equilibrium mechanism and the scenes (see the package docstring)."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from collections.abc import Callable, Mapping
 
@@ -67,33 +10,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..actuators import LinearSpring, SMAWire
-from ..mechanism import Mechanism, Vars
-from ..options import SolverOptions
-from ..positions import solve
-from ..solution import Solution
-from .base import Scene
-from ..xla import jit
+from ...actuators import LinearSpring, SMAWire
+from ...mechanism import Mechanism, Vars
+from ...options import SolverOptions
+from ...positions import solve
+from ...solution import Solution
+from ..base import Scene
+from ...xla import jit
 
-__all__ = [
-    "SCENE",
-    "params",
-    "parameters",
-    "flap_mechanism",
-    "residual",
-    "drive_params",
-    "SCENE_CHAIN",
-    "stiffness",
-    "equilibrium",
-    "tensions",
-    "rigid_wire_angle",
-    "wire_force_for_angle",
-    "FixedPoint",
-    "fixed_point",
-    "fixed_point_rate",
-    "newton_history",
-    "EPS_RANGE",
-]
+__all__ = ["SCENE", "params", "parameters", "flap_mechanism", "residual", "drive_params", "SCENE_CHAIN", "stiffness", "equilibrium", "tensions", "rigid_wire_angle", "wire_force_for_angle", "EPS_RANGE"]
+
 
 G = 9.81
 EPS_RANGE = (0.0, -0.04)  #: SMA strain sweep of the scene (recoverable strain <= 4 %)
@@ -184,7 +110,8 @@ def _param_names(n):
     return _geometry_names(n) + tuple(phys) + ("A_w", "E_M", "E_A", "xi", "g", "force_driven")
 
 
-def _z(p, name):
+def point_z(p, name):
+    """Point ``name`` of the parameters (``name_x``, ``name_y``) as ``x + i y`` (m)."""
     return jax.lax.complex(jnp.asarray(p[f"{name}_x"], float), jnp.asarray(p[f"{name}_y"], float))
 
 
@@ -195,7 +122,7 @@ def _frames(theta, p, n):
     fr = [(jax.lax.complex(zero, zero), jax.lax.complex(zero + 1, zero), jax.lax.complex(zero, zero))]
     phi = zero
     for b in range(1, n + 1):
-        Jb = _z(p, f"J{b}")
+        Jb = point_z(p, f"J{b}")
         o, r, Jp = fr[-1]
         phi = phi + theta[b - 1]
         fr.append((o + r * (Jb - Jp), jax.lax.complex(jnp.cos(phi), jnp.sin(phi)), Jb))
@@ -209,10 +136,10 @@ def _at(fr, b, x):
 
 def _actuator_points(fr, p, kind, j):
     # F on body j-1 (ahead of hinge j), A on body j (behind it)
-    return _at(fr, j - 1, _z(p, f"{kind}{j}F")), _at(fr, j, _z(p, f"{kind}{j}A"))
+    return _at(fr, j - 1, point_z(p, f"{kind}{j}F")), _at(fr, j, point_z(p, f"{kind}{j}A"))
 
 
-def _geometry(theta, p, n):
+def hinge_geometry(theta, p, n):
     """Wire lengths, spring lengths and CG heights, each ``(n,)`` (m), with their gradients
     ``d/dtheta``, each ``(n, n)`` (m/rad; row = element, column = hinge).
 
@@ -235,7 +162,7 @@ def _geometry(theta, p, n):
 
     wires = [actuator("w", j) for j in range(1, n + 1)]
     springs = [actuator("s", j) for j in range(1, n + 1)]
-    cgs = [_at(fr, b, _z(p, f"cg{b}")) for b in range(1, n + 1)]
+    cgs = [_at(fr, b, point_z(p, f"cg{b}")) for b in range(1, n + 1)]
     ycg = jnp.stack([jnp.imag(z) for z in cgs])
     dy = jnp.stack([jnp.stack([jnp.imag(d) for d in turn(z, b)]) for b, z in enumerate(cgs, start=1)])
     stack = lambda xs: (jnp.stack([x[0] for x in xs]), jnp.stack([x[1] for x in xs]))  # noqa: E731
@@ -243,26 +170,27 @@ def _geometry(theta, p, n):
     return (lw, ls, ycg), (dlw, dls, dy)
 
 
-def _rest_length(p, kind, j):
-    return jnp.abs(_z(p, f"{kind}{j}A") - _z(p, f"{kind}{j}F"))
+def rest_length(p, kind, j):
+    """Length (m) of element ``kind`` (``"w"`` wire, ``"s"`` spring) of hinge ``j`` as built."""
+    return jnp.abs(point_z(p, f"{kind}{j}A") - point_z(p, f"{kind}{j}F"))
 
 
 @functools.lru_cache(maxsize=None)
 def _laws(n, law):
     wires = tuple(
-        SMAWire(area="A_w", length0=lambda p, j=j: _rest_length(p, "w", j), E_M="E_M", E_A="E_A",
+        SMAWire(area="A_w", length0=lambda p, j=j: rest_length(p, "w", j), E_M="E_M", E_A="E_A",
                 prestrain="eps", fraction="xi", law=law)
         for j in range(1, n + 1)
     )
     springs = tuple(
-        LinearSpring(stiffness=f"k{j}", length0=lambda p, j=j: _rest_length(p, "s", j), preload=f"F_pre{j}")
+        LinearSpring(stiffness=f"k{j}", length0=lambda p, j=j: rest_length(p, "s", j), preload=f"F_pre{j}")
         for j in range(1, n + 1)
     )
     return wires, springs
 
 
-def _tensions(theta, eps, p, n, law=None, geo=None):
-    (lw, ls, _), _ = _geometry(theta, p, n) if geo is None else geo
+def wire_tensions(theta, eps, p, n, law=None, geo=None):
+    (lw, ls, _), _ = hinge_geometry(theta, p, n) if geo is None else geo
     wires, springs = _laws(n, law)
     pe = Vars({**dict(p), "eps": eps})
     sma = jnp.stack([w.tension(lw[i], pe) for i, w in enumerate(wires)])
@@ -302,9 +230,9 @@ def residual(theta, eps, p, *, n_hinges: int = 2, law: Callable | None = None):
     """
     n = n_hinges
     theta = jnp.asarray(theta)
-    geo = _geometry(theta, p, n)
+    geo = hinge_geometry(theta, p, n)
     dlw, dls, dy = geo[1]
-    tw, ts = _tensions(theta, eps, p, n, law, geo)
+    tw, ts = wire_tensions(theta, eps, p, n, law, geo)
     m = jnp.stack([jnp.asarray(p[f"m{b}"]) for b in range(1, n + 1)])
     # virtual work: sum of tension x moment arm, plus weight x d(height)
     return tw @ dlw + ts @ dls + (m * p["g"]) @ dy
@@ -346,10 +274,10 @@ def flap_mechanism(n_hinges: int = 2, law: Callable | None = None) -> Mechanism:
         def mk(fn):
             return lambda q, u, p: fn(_frames(jnp.stack([q[c] for c in coords]), p, n), p)
 
-        out = {"LE": mk(lambda fr, p: 0.0 * _z(p, "J1")), "TE": mk(lambda fr, p: _at(fr, n, _z(p, "TE")))}
+        out = {"LE": mk(lambda fr, p: 0.0 * point_z(p, "J1")), "TE": mk(lambda fr, p: _at(fr, n, point_z(p, "TE")))}
         for j in range(1, n + 1):
             out[f"J{j}"] = mk(lambda fr, p, j=j: fr[j][0])
-            out[f"CG{j}"] = mk(lambda fr, p, j=j: _at(fr, j, _z(p, f"cg{j}")))
+            out[f"CG{j}"] = mk(lambda fr, p, j=j: _at(fr, j, point_z(p, f"cg{j}")))
             for kind in ("w", "s"):
                 out[f"{kind}{j}F"] = mk(lambda fr, p, j=j, kind=kind: _actuator_points(fr, p, kind, j)[0])
                 out[f"{kind}{j}A"] = mk(lambda fr, p, j=j, kind=kind: _actuator_points(fr, p, kind, j)[1])
@@ -386,7 +314,7 @@ def equilibrium(p: Mapping, u, *, n_hinges: int = 2, drive: str = "strain", gues
 def tensions(theta, u, p, *, n_hinges=2, drive="strain", law=None):
     """``(wire tensions (n,), spring tensions (n,))`` in N at the hinge angles `theta`."""
     eps, pp = drive_params(p, u, n_hinges=n_hinges, drive=drive)
-    return _tensions(jnp.asarray(theta), eps, pp, n_hinges, law)
+    return wire_tensions(jnp.asarray(theta), eps, pp, n_hinges, law)
 
 
 def wire_force_for_angle(theta, p, *, n_hinges=1):
@@ -395,11 +323,11 @@ def wire_force_for_angle(theta, p, *, n_hinges=1):
     th = jnp.atleast_1d(jnp.asarray(theta, float))
     eps, pp = drive_params(p, jnp.zeros(n_hinges), n_hinges=n_hinges, drive="force")
     r0 = residual(th, eps, pp, n_hinges=n_hinges)
-    dlw = _geometry(th, p, n_hinges)[1][0]
+    dlw = hinge_geometry(th, p, n_hinges)[1][0]
     return -r0[0] / dlw[0, 0]
 
 
-def _circle_angle(L, a, g, near):
+def circle_angle(L, a, g, near):
     """Angle t with ``|a e^{it} - g| = L`` nearest `near`, or NaN if out of reach (eq. 1.7, corrected)."""
     w = a * jnp.conj(g)
     C = (jnp.abs(a) ** 2 + jnp.abs(g) ** 2 - L**2) / 2
@@ -415,113 +343,16 @@ def rigid_wire_angle(eps, p, j: int = 1, near=0.0):
     """Rigid-wire limit (E -> inf) of the strain-driven case: the hinge angle at which wire j has
     length ``L0 (1 + eps)``.  This is the corrected §1.2 inverse solution (a circle intersection
     in the hinge frame; the branch nearest `near`).  NaN when that length is out of reach."""
-    J = _z(p, f"J{j}")
-    a, g = _z(p, f"w{j}A") - J, _z(p, f"w{j}F") - J
-    return _circle_angle(_rest_length(p, "w", j) * (1.0 + eps), a, g, near)
-
-
-# --------------------------------------------------------------------------- the document's fixed point
-@dataclasses.dataclass(frozen=True)
-class FixedPoint:
-    """Result of ``fixed_point``: `theta` (rad), `iterations`, `status` (``"converged"``,
-    ``"diverged"``, ``"unreachable"``, ``"2-cycle"`` or ``"maxit"``), `history` (iterates,
-    ``(k+1, n)`` rad) and `amplitude` (half the 2-cycle swing, rad; NaN otherwise)."""
-
-    theta: np.ndarray
-    iterations: int
-    status: str
-    history: np.ndarray
-    amplitude: np.ndarray
-
-
-@functools.partial(jit, static_argnums=(3, 4))
-def _fp_step(theta, eps, p, n, law):
-    # Algorithm 1 (corrected physics), Jacobi sweep over the hinges: the spring tension that
-    # balances hinge j at theta^k (eq. 1.15) -> spring length -> theta_j^{k+1} from the spring's
-    # inverse kinematics (eq. 1.7 as a circle intersection).
-    R = residual(theta, eps, p, n_hinges=n, law=law)
-    _, ts = _tensions(theta, eps, p, n, law)
-    dls = _geometry(theta, p, n)[1][1]
-    new = []
-    for j in range(1, n + 1):
-        d = dls[j - 1, j - 1]
-        t_need = -(R[j - 1] - ts[j - 1] * d) / d
-        L_need = _rest_length(p, "s", j) + (t_need - p[f"F_pre{j}"]) / p[f"k{j}"]
-        J = _z(p, f"J{j}")
-        new.append(_circle_angle(L_need, _z(p, f"s{j}A") - J, _z(p, f"s{j}F") - J, theta[j - 1]))
-    return jnp.stack(new)
-
-
-def fixed_point(p: Mapping, u, *, n_hinges: int = 2, drive: str = "strain", theta0=None, tol: float = 1e-10,
-                maxit: int = 200, blowup: float = np.pi, law=None) -> FixedPoint:
-    """The document's Algorithm 1 (with its physics corrected), with its iterate history.
-
-    Each iteration takes, for every hinge, the spring tension that balances the moment at the
-    current angles (eq. 1.15).  That gives a spring length, and eq. 1.7 (a circle
-    intersection) gives the new angle.  The iteration stops when the step is below `tol` (rad),
-    an angle exceeds `blowup`, or the spring length asked for is out of the linkage's reach.
-    """
-    th = np.zeros(n_hinges) if theta0 is None else np.asarray(theta0, float)
-    eps, pp = drive_params(p, u, n_hinges=n_hinges, drive=drive)
-    pj = {k: jnp.asarray(v, float) for k, v in pp.items()}
-    hist = [th.copy()]
-    nan = np.full(n_hinges, np.nan)
-    for it in range(1, maxit + 1):
-        new = np.asarray(_fp_step(jnp.asarray(th), eps, pj, n_hinges, law))
-        hist.append(new.copy())
-        if np.any(np.isnan(new)):
-            return FixedPoint(new, it, "unreachable", np.array(hist), nan)
-        if np.any(np.abs(new) > blowup):
-            return FixedPoint(new, it, "diverged", np.array(hist), nan)
-        if np.max(np.abs(new - th)) < tol:
-            return FixedPoint(new, it, "converged", np.array(hist), nan)
-        th = new
-    H = np.array(hist)
-    if np.max(np.abs(H[-1] - H[-3])) < 1e-8 and np.max(np.abs(H[-1] - H[-2])) > 1e-6:
-        return FixedPoint(th, maxit, "2-cycle", H, np.abs(H[-1] - H[-2]) / 2)
-    return FixedPoint(th, maxit, "maxit", H, nan)
-
-
-@functools.partial(jit, static_argnums=(3, 4))
-def _rate_parts(th, eps, p, n, law):
-    return stiffness(th, eps, p, n_hinges=n, law=law), _geometry(th, p, n)[1][1]
-
-
-def fixed_point_rate(p: Mapping, u, theta_star, *, n_hinges=2, drive="strain", law=None):
-    """Linear rate of Algorithm 1 about the root: eigenvalues of ``I - D^-1 H`` with
-    ``D = diag(k_j (dL_spring,j/dtheta_j)^2)`` and H the stiffness.  Returns
-    ``(eigenvalues, spectral radius)``; the scheme converges only if the radius is below 1.
-    For one hinge the eigenvalue is ``1 - V''/(k L_s'^2)``."""
-    th = jnp.atleast_1d(jnp.asarray(theta_star, float))
-    eps, pp = drive_params(p, u, n_hinges=n_hinges, drive=drive)
-    H, dls = (np.asarray(x) for x in _rate_parts(th, eps, {k: jnp.asarray(v, float) for k, v in pp.items()}, n_hinges, law))
-    D = np.diag([float(p[f"k{j}"]) * dls[j - 1, j - 1] ** 2 for j in range(1, n_hinges + 1)])
-    ev = np.linalg.eigvals(np.eye(n_hinges) - np.linalg.solve(D, 0.5 * (H + H.T)))
-    return ev, float(np.max(np.abs(ev)))
-
-
-def newton_history(p: Mapping, u, *, n_hinges=2, drive="strain", theta0=None, tol=1e-13, maxit=20, law=None):
-    """Plain Newton on the same residual (the engine's ``solve`` adds damping and statuses).
-    Returns ``(theta, max |R| per iterate (N m))``: quadratic convergence, for comparison with
-    ``fixed_point``."""
-    th = jnp.zeros(n_hinges) if theta0 is None else jnp.asarray(theta0, float)
-    eps, pp = drive_params(p, u, n_hinges=n_hinges, drive=drive)
-    f = jit(lambda t, e, q: (residual(t, e, q, n_hinges=n_hinges, law=law), stiffness(t, e, q, n_hinges=n_hinges, law=law)))
-    hist = []
-    for _ in range(maxit + 1):
-        R, H = f(th, eps, pp)
-        hist.append(float(jnp.max(jnp.abs(R))))
-        if hist[-1] < tol:
-            break
-        th = th - jnp.linalg.solve(H, R)
-    return np.asarray(th), hist
+    J = point_z(p, f"J{j}")
+    a, g = point_z(p, f"w{j}A") - J, point_z(p, f"w{j}F") - J
+    return circle_angle(rest_length(p, "w", j) * (1.0 + eps), a, g, near)
 
 
 # --------------------------------------------------------------------------- the scene
 @functools.partial(jit, static_argnums=(0,))
 def _outputs_batch(n, p, q, eps):
     def one(th, e):
-        tw, ts = _tensions(th, e, p, n)
+        tw, ts = wire_tensions(th, e, p, n)
         return tw, ts, _min_eig(stiffness(th, e, p, n_hinges=n))
 
     ok = jnp.all(jnp.isfinite(q), axis=-1)

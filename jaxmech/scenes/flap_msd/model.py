@@ -1,63 +1,8 @@
-"""The MSD double-flap extraction mechanism (seed 000_0e5ea70f9886b82a).
-
-Source: "MSD Project: flap extraction and retraction system", PoliMi, Group 6,
-A.Y. 2022/23.  The analysis behind every choice below, with evidence, is in
-``docs/seeds/flap_msd.md``; ``tests/seeds/reference_flap_msd.py`` is an independent
-numpy/scipy implementation that the tests compare against.
-
-**Model.**  A crank ``OA`` (angle ``alpha``, counter-clockwise, driven at O) moves the
-main flap (chord ``c1``, hinged at the fixed point ``C``) through the coupler ``AG``;
-``G`` is the tip of the main flap's arm ``CG`` (perpendicular to the chord).  The bar
-``BD`` (fixed pivot ``B``) and the straight bar ``DGE`` (through ``G``) carry ``E``, and
-the link ``EH`` turns the second flap (chord ``c2``, hinged at the main flap's trailing
-edge ``F``; ``H`` is the tip of its arm ``FH``).  Gauss plane, angles counter-clockwise
-from +x, SI units; the flap deflections ``delta`` and ``theta`` are *clockwise*
-(chords along ``e^{-i delta}`` and ``e^{-i theta}``).  Three loop closures (report §2):
-
-    L1 = a e^{i alpha} + b e^{i beta} - (l - i r) - i c e^{-i delta}              (§2.1)
-    L2 = d e^{i phi} + p e^{i psi} - (s - i t) - i c e^{-i delta}                  (§2.2)
-    L3 = (i c - c1) e^{-i delta} + g e^{i psi} + h e^{i xi} - i z e^{-i theta}      (§2.3)
-
-**Branch.**  Of the four assemblies at ``alpha = 275 deg`` (loop 1 has only one), the
-scene takes the dyad signs (+, -, +): flaps retracted at the start (delta = 0.95 deg,
-theta = 0.02 deg) and the second flap turning through 60.58 deg over the stroke, the
-design goal of §1.  The branch indicator has one entry per loop, ``cos(beta+delta)``,
-``-sin(phi-psi)``, ``cos(theta+xi)``, all positive on it; an entry vanishes at a toggle of
-its loop, and a flip is reported ``BRANCH`` naming the loop.
-
-**Loads (§3.1).**  Masses ``M``, ``m`` at the chord midpoints ``G1``, ``G2`` with
-inertias ``J_M``, ``J_m``; gravity ``G``; linearised lift ``F1 = q S1 Cl_delta delta`` at
-the quarter chord ``AC1`` normal to the chord (``+i e^{-i delta}``), ``F2`` likewise with
-``theta`` at ``AC2``; pure aerodynamic moments entering the power as the report's Pi
-writes them, ``MAC1 delta_dot + MAC2 theta_dot`` with ``MAC = q S c Cm``.  These are the
-bodies and loads of ``MODEL`` (a ``jaxmech.dynamics.Model``); the driving torque at O
-follows by virtual power (``torque``), and the DC motor's steady voltage is
-``v = R_a T / K_m + K_m alpha_dot`` (``MOTOR``, §3.2, inductance neglected).
-
-**Singular positions.**  ``singular_positions()`` finds, with the engine, the toggles that
-bound the branch: loop 2 (``phi - psi = -180 deg``) at 256.396 deg and 440.942 deg
-(= 80.942 deg); the stroke is far from both.
-
-**Corrections to the document** (22 in all, with evidence, in ``docs/seeds/flap_msd.md``
-section (d)); those that change numbers:
-
-- §2.1-§2.3 velocity and acceleration formulas: a wrong matrix sign, a doubled factor
-  ``a``, ``sin(beta)`` for ``sin(psi)``, ``sin(phi+psi)`` for ``sin(phi-psi)``, missing
-  squares, a spurious factor ``c``, a missing ``c``, missing brackets.  Not used here:
-  every derivative comes from the loop closures by the implicit function theorem.
-- §2.3 singularity condition: ``theta + xi != pi/2 + k pi``, not ``k pi/2``.
-- §3.1 printed ``T_m``: ``F2 c1 cos(theta - delta)`` (printed ``sin``: up to 852 N m, 28 %,
-  off at 305 deg) and ``m c2^2/4`` (printed ``m (c2^2/4)^2``); ``dT/dt`` has ``m c2^2/4``
-  for the theta-dd coefficient (printed ``m c1^2/4``); the ``AC1`` velocity is mislabelled
-  and wrong.  ``torque_document`` transcribes the printed formula for comparison.
-- §4 data: ``g`` (printed ``q``) is the E-G length; ``J_M = M c1 3.5/K`` and
-  ``J_m = m c2 2.5/K`` are used as printed (kg m^2), though their units are kg m; their
-  effect on the torque is below 2 N m.
-"""
+"""The double flap's model: parameters, the three loop closures, the closed-form guess,
+loads, torque and voltage, and the scene (see the package docstring)."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from collections.abc import Mapping
 
@@ -65,35 +10,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..actuators import DCMotor
-from ..dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
-from ..kinematics import Motion, chain_rule
-from ..mechanism import Mechanism, cis
-from ..continuation import solve_stroke
-from ..exported import cached_call
-from ..status import Status
-from .base import Scene
-from ..xla import jit
+from ...actuators import DCMotor
+from ...dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
+from ...kinematics import Motion, chain_rule
+from ...mechanism import Mechanism, cis
+from ...exported import cached_call
+from ..base import Scene
+from ...xla import jit
 
-__all__ = [
-    "SCENE",
-    "mechanism",
-    "DEFAULTS",
-    "PARAMETERS",
-    "closed_form_positions",
-    "MODEL",
-    "MOTOR",
-    "loop_determinants",
-    "torque",
-    "torque_document",
-    "voltage",
-    "Toggle",
-    "singular_positions",
-]
+__all__ = ["SCENE", "mechanism", "DEFAULTS", "PARAMETERS", "closed_form_positions", "MODEL", "MOTOR", "loop_determinants", "torque", "torque_document", "voltage"]
+
 
 _K = 17.0  # the report's "meter-model conversion factor" (§4): drawing units per metre
-_DEG = np.pi / 180.0
-ALPHA_START, ALPHA_END = 275.0 * _DEG, 320.0 * _DEG
+DEG = np.pi / 180.0  #: one degree (rad)
+ALPHA_START, ALPHA_END = 275.0 * DEG, 320.0 * DEG
 COORDS = ("beta", "delta", "phi", "psi", "xi", "theta")
 
 #: Report §4 data in SI units (lengths in m: the report's drawing units divided by K).
@@ -400,107 +330,6 @@ def _outputs(p, motion: Motion):
         "lift_main": (qdyn * p["S1"] * p["Cl_delta"] * motion.q[:, 1], "N"),
         "lift_second": (qdyn * p["S2"] * p["Cl_theta"] * motion.q[:, 5], "N"),
     }
-
-
-# --------------------------------------------------------------------------- singular positions
-@dataclasses.dataclass(frozen=True)
-class Toggle:
-    """A singular (toggle) position of the scene's branch.
-
-    - `alpha`: crank angle (rad), unwrapped: continuous with the stroke (may exceed 2 pi).
-    - `q`: ``{coordinate: angle (rad)}`` there.
-    - `loop`: which loop closure is singular (1, 2 or 3): its two unknown links are aligned.
-    - `side`: ``"below"`` or ``"above"`` the stroke; the branch cannot be assembled past it.
-    - `residual`: ``|Phi|`` there (m); `det`: ``det Phi_q / L^6`` (-), both ~0.
-    """
-
-    alpha: float
-    q: dict
-    loop: int
-    side: str
-    residual: float
-    det: float
-
-
-def _fold_residual(z, p, L):
-    # Bordered system for a limit point: Phi(q, alpha) = 0 and det Phi_q(q, alpha) = 0.
-    # At a simple fold its Jacobian is regular, so Newton converges quadratically there,
-    # where a Newton on alpha alone (det of the solved q(alpha)) sees a square-root cusp.
-    q, u = z[:6], z[6:]
-    phi = mechanism.residual(q, u, p) / L
-    jac = jax.jacfwd(mechanism.residual)(q, u, p) / L
-    return jnp.concatenate([phi, jnp.linalg.det(jac)[None]])
-
-
-@jit
-def _fold_newton(z, p):
-    L = mechanism.length_scale(p)
-
-    def body(_, z):
-        f = _fold_residual(z, p, L)
-        j = jax.jacfwd(_fold_residual)(z, p, L)
-        return z - jnp.linalg.solve(j, f)
-
-    z = jax.lax.fori_loop(0, 30, body, z)
-    return z, _fold_residual(z, p, L)
-
-
-_CHUNK = 46  # points per continuation call: the shape run_scene(SCENE, 46) compiles
-
-
-def singular_positions(p: Mapping | None = None, *, step_deg: float = 1.0, span_deg: float = 360.0) -> tuple[Toggle, Toggle]:
-    """The singular positions nearest to the stroke, below and above it, on the scene's branch.
-
-    Found with the engine in two steps: (1) ``solve_stroke`` continues the branch from the
-    stroke start downwards and upwards in steps of ``step_deg`` (over at most ``span_deg``);
-    the first position that is not ``CONVERGED``, or leaves the branch, brackets the toggle;
-    (2) a Newton on the bordered system ``Phi(q, alpha) = 0, det Phi_q = 0`` in ``(q, alpha)``,
-    started from the last converged position, pins it to machine precision.  For this
-    mechanism they are also the **assembly limits** of the branch: past them loop 2 cannot
-    close (``|G - B| < d - p``).
-
-    **Arguments**: `p`: parameter overrides (default: the report's design).
-
-    **Returns** ``(below, above)`` ``Toggle`` records; ``alpha`` is continuous with the
-    stroke (the upper toggle of the default design is at 440.94 deg, i.e. 80.94 deg).
-
-    **Raises** ``RuntimeError`` if no toggle lies within ``span_deg`` on one side, or the
-    bordered Newton does not converge inside its bracket.
-    """
-    p = SCENE.params(**(p or {}))
-    pj = {k: jnp.asarray(v, float) for k, v in p.items()}
-    q_start = closed_form_positions(p, ALPHA_START)
-    step = step_deg * _DEG
-    out = []
-    for side, sgn in (("below", -1.0), ("above", 1.0)):
-        a0, qa, k_fail = ALPHA_START, q_start, None
-        # Chunks of _CHUNK points, each continuing from the previous chunk's last position.
-        for _ in range(int(np.ceil(span_deg / step_deg / (_CHUNK - 1)))):
-            us = a0 + sgn * step * np.arange(_CHUNK)
-            sol = solve_stroke(mechanism, jnp.asarray(us), p, qa)
-            good = (np.asarray(sol.status) == Status.CONVERGED) & np.all(np.asarray(sol.branch) > 0, axis=-1)
-            if not good[0]:
-                raise RuntimeError(f"flap_msd: the branch is lost at alpha = {np.rad2deg(a0):.6g} deg")
-            if not np.all(good):
-                k_fail = int(np.flatnonzero(~good)[0])
-                break
-            a0, qa = us[-1], sol.q[-1]
-        if k_fail is None:
-            raise RuntimeError(f"flap_msd: no singular position within {span_deg} deg {side} the stroke start")
-        lo, hi = sorted((us[k_fail - 1], us[k_fail]))
-        z, f = _fold_newton(jnp.concatenate([sol.q[k_fail - 1], jnp.asarray(us[k_fail - 1 : k_fail])]), pj)
-        z, f = np.asarray(z), np.asarray(f)
-        if not (np.all(np.abs(f) < 1e-10) and lo - 1e-9 <= z[6] <= hi + 1e-9):
-            raise RuntimeError(f"flap_msd: the toggle {side} the stroke did not converge in its bracket "
-                               f"[{np.rad2deg(lo):.6g}, {np.rad2deg(hi):.6g}] deg")
-        dets = np.asarray(loop_determinants(z[:6], p))
-        scale = np.array([p["b"] * p["c"], p["d"] * p["p"], p["h"] * p["z"]])
-        out.append(Toggle(
-            alpha=float(z[6]), q=dict(zip(COORDS, map(float, z[:6]))),
-            loop=int(np.argmin(np.abs(dets) / scale)) + 1, side=side,
-            residual=float(np.linalg.norm(f[:6]) * float(mechanism.length_scale(p))), det=float(f[6]),
-        ))
-    return out[0], out[1]
 
 
 # --------------------------------------------------------------------------- drawing

@@ -1,62 +1,5 @@
-"""Circular-arc-track flap driven by a screw jack (seed 003: Arslan, MSc thesis, IZTECH 2022).
-
-**Model.**  An inverted slider-crank whose crank is the flap itself.  The flap (link 2)
-carries two pins, F on a slot of radius ``b1`` and G on a slot of radius ``c1``; both
-slots are circular arcs centred at ``A0``, so the flap turns about the remote centre
-``A0`` (origin; x towards the nose, y up, angles CCW).  The screw (link 3) is pivoted at
-``B0 = a1 e^{i alpha0}``; the nut (link 4) slides on it and is pinned to the flap at A.
-The input is the nut travel ``s34 = |B0 A|`` (m); deploying the flap is CCW (``theta12``
-grows with ``s34``).  The coordinates are the thesis's angles ``theta12``, ``theta13``
-and the flap's translation ``(x2, y2)``, which the two slots hold at zero::
-
-    x2 + i y2 + a2 e^{i(alpha0+theta12)} = a1 e^{i alpha0} + s34 e^{i(alpha0+theta13)}
-    |G| - c1 = 0,   G = x2 + i y2 + c1 e^{i(beta1+beta2+theta12-theta12_i)}
-    |F| - b1 = 0,   F = x2 + i y2 + b1 e^{i(beta1+theta12-theta12_i)}
-
-Each slot equation has a unit gradient, so with the engine's convention
-``I - Q + Phi_x^T lambda = tau e_u`` (constraint force on the bodies ``-Phi_x^T lambda``)
-the slot reactions in newtons are ``G12G = -lambda_G``, ``G12F = -lambda_F`` (outward
-radial positive), the loop multiplier is ``-F42`` and ``tau = F_input`` (N, nut push
-along ``+s34``).  Statics is quasi-static (inertia neglected, as in the thesis; the
-accelerations of A and D stay below 0.1 % of g).
-
-**Loads and the reading that reproduces Table 3.**  Per mechanism (screw jack, two per
-flap): the air moment ``M12 / n_jacks`` (a couple that closes the flap), linear in
-``s34`` from ``M12_i`` (flap closed) to ``M12_f`` (deployed), and the weight
-``weight_share * m_flap * g`` at D with ``weight_share = 1``: each jack carries *half
-the air moment but the whole 12 kg weight*.  Cruise: ``M12_i = M12_f = 750`` N m, the
-column is the closed flap.  Landing: ``M12_i = 220``, ``M12_f = 650`` N m, the column is
-closed (min) / deployed (max), except G12G, which is printed in algebraic min/max order
-(deployed first).  Screw torques use the load ``L = F_input``.
-
-**Document corrections** (details and evidence in ``docs/seeds/arc_track_flap.md``):
-eq. (3.3.2) is ``omega13 = s34_dot / (s34 tan psi)``; eq. (3.3.3)'s second term is ``+``
-(so Fig. 46's alpha12 and acceleration components have the wrong sign); the lead angle
-is ``tan lambda = l / (2 pi r)``; Table 3's landing G12G is deployed-first; the weight is
-counted once per jack (twice per flap) while the moment is halved; "weight below 8 % of
-F_input" holds only with the sheet's metric (8.64 % against eq. 3.5.1's numerator);
-eqs. (3.4.11) and (3.4.15) have scalar sign slips; Table 2 shades alpha2 as an input;
-typos (``sin a0``, ``x_A`` for ``x_A_dot``, Excel's ``ATAN2(x; y)``); landing moments
-are interpolated in ``s34``.
-
-**Parameters** (SI, the thesis's names): ``a1`` |A0 B0|, ``a2`` |A0 A|, ``a3`` screw
-length, ``alpha0`` angle x-A0-B0, ``b1 > c1`` slot radii (pins F, G), ``beta1`` angle of
-F's slot start, ``beta2`` angle F-A0-G, ``beta3`` arc angle = flap rotation, ``x_D``,
-``y_D`` centre of mass (flap closed), ``m_flap``, ``g``, screw ``r`` (mean radius), ``l``
-(lead), ``f`` (friction); ``n_jacks`` (2), ``weight_share`` (1: the thesis's reading),
-``M12_i``, ``M12_f`` whole-flap air moment at the closed / deployed flap.  Default drive:
-nut at 35 mm/s from ``s34_i`` to ``s34_f = s34_i + 2 a2 sin(beta3/2)``.
-
-**API.**  ``SCENE`` (cruise), ``LANDING_SCENE`` / ``scene_for(scenario)``, ``params(scenario,
-**overrides)``; from the command line ``jaxmech run arc_track_flap`` (cruise) and
-``jaxmech run arc_track_flap_landing`` (landing, its own title and files).  ``design(**inputs)`` (Chapter 4: inputs -> parameters),
-``geometry(p)``, ``validate(p, s34=None)`` (Section 5.3's red cells), ``forces(p, s34)``,
-``quasi_static(q, u, p)``, ``screw_torques(L, p)``, ``air_moment(s34, p)``,
-``accelerations(p)``, ``fairing_depth(p)``, ``table2(p)``, ``table3(p)``; ``MECHANISM``,
-``MODEL`` (``jaxmech.dynamics``), ``SCREW`` (``jaxmech.actuators.ScrewJack``).
-
-Units: SI throughout (m, rad, N, N m, kg, s).
-"""
+"""The arc-track flap's model: its design method (Ch. 4), validity checks, mechanism,
+loads and statics, and the scenes (see the package docstring)."""
 
 from __future__ import annotations
 
@@ -68,41 +11,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..actuators import ScrewJack
-from ..dynamics import Body, Gravity, Model, Moment, generalized_forces
-from ..exported import cached_call
-from ..mechanism import Mechanism, cis
-from ..positions import solve_one
-from ..status import Status, status_message
-from .base import Scene, run_scene
-from ..xla import jit
+from ...actuators import ScrewJack
+from ...dynamics import Body, Gravity, Model, Moment, generalized_forces
+from ...exported import cached_call
+from ...mechanism import Mechanism, cis
+from ..base import Scene
+from ...xla import jit
 
-__all__ = [
-    "SCENE",
-    "LANDING_SCENE",
-    "SCENARIOS",
-    "PARAMETERS",
-    "THESIS_INPUTS",
-    "MECHANISM",
-    "scene_for",
-    "params",
-    "design",
-    "geometry",
-    "validate",
-    "air_moment",
-    "screw_torques",
-    "SCREW",
-    "MODEL",
-    "quasi_static",
-    "forces",
-    "accelerations",
-    "fairing_depth",
-    "table2",
-    "table3",
-]
+__all__ = ["SCENE", "LANDING_SCENE", "SCENARIOS", "PARAMETERS", "THESIS_INPUTS", "MECHANISM", "scene_for", "design", "geometry", "validate", "air_moment", "screw_torques", "SCREW", "MODEL", "quasi_static"]
 
-_MM = 1e-3
-_DEG = math.pi / 180.0
+
+MM = 1e-3  #: one millimetre (m): the thesis's lengths are in mm
+DEG = math.pi / 180.0  #: one degree (rad)
 
 #: Whole-flap air moments (N m) at the closed (``M12_i``) and deployed (``M12_f``) flap
 #: for the thesis's two flight scenarios (Section 5.2).  Cruise is given for the closed
@@ -114,13 +34,14 @@ SCENARIOS = {
 
 #: The Chapter 4 design inputs of the case study (Table 2, yellow cells), SI.
 THESIS_INPUTS = dict(
-    a1=275 * _MM, a2=240 * _MM, alpha0=65 * _DEG,
-    b1=350 * _MM, c1=300 * _MM, beta1=40 * _DEG, beta2=20 * _DEG, beta3=35 * _DEG,
-    x_D=-30 * _MM, y_D=340 * _MM, m_flap=12.0, g=9.81,
-    r=16 * _MM, l=8 * _MM, f=0.1,
+    a1=275 * MM, a2=240 * MM, alpha0=65 * DEG,
+    b1=350 * MM, c1=300 * MM, beta1=40 * DEG, beta2=20 * DEG, beta3=35 * DEG,
+    x_D=-30 * MM, y_D=340 * MM, m_flap=12.0, g=9.81,
+    r=16 * MM, l=8 * MM, f=0.1,
 )
 
-_PARAMS = ("a1", "a2", "a3", "alpha0", "b1", "c1", "beta1", "beta2", "beta3", "x_D", "y_D",
+#: Every parameter of the scene, in the thesis's order.
+PARAM_NAMES = ("a1", "a2", "a3", "alpha0", "b1", "c1", "beta1", "beta2", "beta3", "x_D", "y_D",
            "m_flap", "g", "r", "l", "f", "n_jacks", "weight_share", "M12_i", "M12_f")
 _LENGTH_PARAMS = ("a1", "a2", "a3", "b1", "c1", "x_D", "y_D", "r", "l")
 
@@ -163,7 +84,7 @@ def _theta12_i(p, xp=jnp):
     return xp.arccos(p["a2"] * xp.cos(p["beta3"] / 2) / p["a1"]) - p["beta3"] / 2
 
 
-def _stroke_ends(p, xp=jnp):
+def stroke_ends(p, xp=jnp):
     """(s34_i, s34_f, theta12_i) of the collinear design (Chapter 4, steps 2-4); ``xp=np``
     for eager checks on plain numbers."""
     a1, a2, b3 = p["a1"], p["a2"], p["beta3"]
@@ -187,7 +108,7 @@ def geometry(p: Mapping) -> dict:
     points: see ``table2``.
     """
     a1, a2, al0, b3 = p["a1"], p["a2"], p["alpha0"], p["beta3"]
-    s34_i, s34_f, _ = _stroke_ends(p)
+    s34_i, s34_f, _ = stroke_ends(p)
     th12_i, th13_i = _cosine_rule(s34_i, a1, a2)
     th12_f, th13_f = _cosine_rule(s34_f, a1, a2)
     h = a2 * jnp.cos(b3 / 2)
@@ -221,7 +142,7 @@ def design(*, a1, a2, alpha0, b1, c1, beta1, beta2, beta3, x_D, y_D, m_flap, r, 
              n_jacks=n_jacks, weight_share=weight_share, M12_i=M12_i, M12_f=M12_f)
     p = {k: float(v) for k, v in p.items()}
     _validate_design(p)
-    s34_f = float(_stroke_ends(p, np)[1])
+    s34_f = float(stroke_ends(p, np)[1])
     p["a3"] = float(a3) if a3 is not None else math.ceil(round(1.1 * s34_f * 100, 9)) / 100
     validate(p)
     return p
@@ -262,9 +183,9 @@ def validate(p: Mapping, s34=None) -> None:
 
     Also: ``a1 > a2`` (else ``s34_i <= 0``), ``0 < beta3 < pi``, ``0 < |beta2| < pi``.
     """
-    p = {k: float(p[k]) for k in _PARAMS}
+    p = {k: float(p[k]) for k in PARAM_NAMES}
     _validate_design(p)
-    s34_i, s34_f, _ = (float(x) for x in _stroke_ends(p, np))
+    s34_i, s34_f, _ = (float(x) for x in stroke_ends(p, np))
     if s34_f > p["a3"]:
         raise ValueError(
             f"the stroke is longer than the screw: s34_f = {s34_f:.6g} m > a3 = {p['a3']:.6g} m (the "
@@ -324,7 +245,7 @@ MECHANISM = Mechanism(
     name="arc_track_flap",
     coords=("theta12", "theta13", "x2", "y2"),
     inputs=("s34",),
-    params=_PARAMS,
+    params=PARAM_NAMES,
     lengths=_LENGTH_PARAMS + ("x2", "y2", "s34"),
     signed=("x_D", "y_D"),
     constraints=_constraints,
@@ -342,7 +263,8 @@ MECHANISM = Mechanism(
 )
 
 
-def _guess(p):
+def initial_pose(p):
+    """Coordinates ``(theta12, theta13, x2, y2)`` at the stroke start (the closed flap)."""
     g = geometry(p)
     z = jnp.zeros_like(g["s34_i"])
     return jnp.stack([g["theta12_i"], g["theta13_i"], z, z])
@@ -352,7 +274,7 @@ def _guess(p):
 def air_moment(s34, p: Mapping):
     """Air moment on ONE mechanism (N m, > 0 closes the flap): ``M12 / n_jacks`` with M12
     linear in the nut travel from ``M12_i`` (s34_i) to ``M12_f`` (s34_f) (Fig. 48)."""
-    s34_i, s34_f, _ = _stroke_ends(p)
+    s34_i, s34_f, _ = stroke_ends(p)
     x = (s34 - s34_i) / (s34_f - s34_i)
     return (p["M12_i"] + (p["M12_f"] - p["M12_i"]) * x) / p["n_jacks"]
 
@@ -382,7 +304,7 @@ def screw_torques(L, p: Mapping):
     return SCREW.raise_torque(L, p), SCREW.lower_torque(L, p)
 
 
-def _quasi_static_one(q, u, p):
+def quasi_static_one(q, u, p):
     """Quasi-static forces at one solved pose, by ``dynamics.generalized_forces`` (inertia
     off): ``-Q + Phi_x^T lambda = tau e_u``, so ``Phi_q^T lambda = Q_q`` and
     ``tau = Phi_u^T lambda - Q_u``.  Multiplier rows: loop (x, y) = ``-F42``; slots G, F
@@ -401,7 +323,7 @@ def _quasi_static_one(q, u, p):
 
 @jit
 def _quasi_static_batch(q, u, p):
-    return jax.vmap(lambda q_, u_: _quasi_static_one(q_, u_, p))(q, u)
+    return jax.vmap(lambda q_, u_: quasi_static_one(q_, u_, p))(q, u)
 
 
 def quasi_static(q, u, p: Mapping) -> dict:
@@ -413,7 +335,7 @@ def quasi_static(q, u, p: Mapping) -> dict:
     ``lam`` (the multipliers: loop x, loop y, slot G, slot F).
     """
     q, u = jnp.asarray(q), jnp.asarray(u)
-    pj = {k: jnp.asarray(p[k], q.dtype) for k in _PARAMS}
+    pj = {k: jnp.asarray(p[k], q.dtype) for k in PARAM_NAMES}
     return cached_call(_quasi_static_batch, (), (q, u, pj))  # a new process skips tracing (jaxmech.exported)
 
 
@@ -432,138 +354,12 @@ def _outputs(p, mo):
     }
 
 
-# --------------------------------------------------------------------------- user functions
-def params(scenario: str = "cruise", **overrides) -> dict:
-    """The case study's parameters for ``scenario`` ("cruise" or "landing"), with overrides."""
-    return scene_for(scenario).params(**overrides)
-
-
-_SOLVED_POINTS = ("A", "B", "D", "G", "F")
-_CHUNK = 32  # one compiled solve serves every batch size (inputs are padded to chunks)
-
-
-@jit
-def _solve_chunk(s, p):
-    """Engine solve (from the closed pose) and quasi-static forces for a chunk of travels."""
-    guess = _guess(p)
-
-    def one(s_):
-        sol = solve_one(MECHANISM, s_[None], p, guess)
-        pts = {k: MECHANISM.point(k, sol.q, s_[None], p) for k in _SOLVED_POINTS}
-        return sol.q, sol.status, {**_quasi_static_one(sol.q, s_[None], p), "points": pts}
-
-    return jax.vmap(one)(s)
-
-
-def _solve_at(p, s):
-    """``(q (N, 4), status (N,), forces)`` at nut travels ``s`` (N,); raises if any fails."""
-    MECHANISM.check_params(p)
-    pj = {k: jnp.asarray(p[k], float) for k in _PARAMS}
-    s = np.atleast_1d(np.asarray(s, float))
-    n = s.shape[0]
-    pad = np.concatenate([s, np.full((-n % _CHUNK,), s[-1])])
-    parts = [_solve_chunk(jnp.asarray(pad[i:i + _CHUNK]), pj) for i in range(0, pad.shape[0], _CHUNK)]
-    q, status, out = jax.tree_util.tree_map(lambda *x: np.concatenate([np.asarray(a) for a in x])[:n], *parts)
-    bad = np.flatnonzero(np.asarray(status) != Status.CONVERGED)
-    if bad.size:
-        raise RuntimeError(
-            f"arc_track_flap: {bad.size} of {n} poses failed, first at s34 = {float(s[bad[0]]):.6g} m: "
-            f"{status_message(status[bad[0]])}"
-        )
-    return q, status, out
-
-
-def forces(p: Mapping, s34=None, *, n: int = 101) -> dict:
-    """Positions and per-jack forces solved by the engine at nut travels ``s34`` (m).
-
-    ``s34`` defaults to ``n`` points over the stroke.  **Returns** ``s34``, ``theta12``,
-    ``theta13``, ``status`` and everything of ``quasi_static`` (arrays ``(N,)``).
-    **Raises** ``ValueError`` (``validate``) for a bad design or a travel outside the slots.
-    """
-    validate(p, s34)
-    s = np.linspace(*_stroke_ends(p, np)[:2], n) if s34 is None else s34
-    s = np.atleast_1d(np.asarray(s, float))
-    q, status, out = _solve_at(p, s)
-    return dict(s34=s, theta12=q[:, 0], theta13=q[:, 1], status=status, **out)
-
-
-def accelerations(p: Mapping, *, n: int = 101) -> dict:
-    """|a_A|/g and |a_D|/g (fractions) over the stroke at the scene's 35 mm/s nut speed
-    (``s34_ddot = 0``), from the engine's implicit second derivatives (``run_scene``).
-
-    **Returns** ``s34`` (m), ``aA_over_g``, ``aD_over_g`` and the ``motion``."""
-    res = run_scene(SCENE, n, **p)
-    return dict(s34=res.motion.u[:, 0], aA_over_g=res.outputs["aA_over_g"][0],
-                aD_over_g=res.outputs["aD_over_g"][0], motion=res.motion)
-
-
-def fairing_depth(p: Mapping, *, n: int = 201) -> dict:
-    """Fairing-depth measures (m).
-
-    - ``h = a2 cos(beta3/2)``: the thesis's saving against a dropped-hinge fairing (which
-      reaches A0); it is also the least distance from A0 to the screw line over the stroke
-      (``screw_line_distance``, from the engine's poses; reached at both stroke ends).
-    - ``y_min``: lowest local y of the mechanism over the stroke (screw tip B, nut A,
-      pivot B0, both slot arcs), and ``lowest_part``.
-    """
-    f = forces(p, n=n)
-    pts = f["points"]
-    a1, al0 = p["a1"], p["alpha0"]
-    B0 = a1 * np.exp(1j * al0)
-    e_s = np.exp(1j * (al0 + np.asarray(f["theta13"])))
-    ang = np.linspace(0.0, p["beta3"], n)
-    parts = {
-        "screw tip B": np.min(np.imag(pts["B"])),
-        "screw pivot B0": B0.imag,
-        "nut A": np.min(np.imag(pts["A"])),
-        "b1-slot": np.min(p["b1"] * np.sin(p["beta1"] + ang)),
-        "c1-slot": np.min(p["c1"] * np.sin(p["beta1"] + p["beta2"] + ang)),
-    }
-    parts = {k: float(v) for k, v in parts.items()}
-    low = min(parts, key=parts.get)
-    return dict(h=p["a2"] * math.cos(p["beta3"] / 2),
-                screw_line_distance=float(np.min(np.abs(np.imag(np.conj(e_s) * -B0)))),
-                y_min=parts[low], lowest_part=low, parts=parts)
-
-
-def table2(p: Mapping | None = None) -> dict:
-    """Table 2's computed entries in the thesis's units (mm, deg), from the engine's
-    closed pose: a3, s34_i, delta_s, g2 = |AD|, p2 = |DG|, q2 = |DF|, alpha2 = angle D A0 A."""
-    p = params() if p is None else p
-    s34_i, s34_f, _ = (float(x) for x in _stroke_ends(p, np))
-    pt = {k: complex(v[0]) for k, v in forces(p, s34_i)["points"].items()}
-    return dict(a3=p["a3"] / _MM, s34_i=s34_i / _MM, delta_s=(s34_f - s34_i) / _MM,
-                g2=abs(pt["D"] - pt["A"]) / _MM, p2=abs(pt["D"] - pt["G"]) / _MM,
-                q2=abs(pt["D"] - pt["F"]) / _MM, alpha2=abs(np.angle(pt["D"] / pt["A"])) / _DEG)
-
-
-def table3(p: Mapping | None = None) -> dict:
-    """Table 3 from the engine, in the thesis's units (N, N mm), per jack.
-
-    ``{"cruise": {entry: value}, "landing": {entry: (closed, deployed)}}``: cruise at the
-    closed flap with ``SCENARIOS["cruise"]``; landing closed with M12_i and deployed with
-    M12_f of ``SCENARIOS["landing"]``.  Entries F_input, G12G, G12F, F34y, T_R, T_L.
-    NB the thesis prints landing G12G in algebraic min/max order, i.e. (deployed, closed).
-    """
-    p = params() if p is None else dict(p)
-    ends = [float(x) for x in _stroke_ends(p, np)[:2]]
-
-    def at(scenario):
-        f = forces({**p, **SCENARIOS[scenario]}, jnp.asarray(ends))
-        return {k: np.asarray(f[k]) * (1 / _MM if k in ("T_R", "T_L") else 1.0)
-                for k in ("F_input", "G12G", "G12F", "F34y", "T_R", "T_L")}
-
-    cr, la = at("cruise"), at("landing")
-    return {"cruise": {k: float(v[0]) for k, v in cr.items()},
-            "landing": {k: (float(v[0]), float(v[1])) for k, v in la.items()}}
-
-
 # --------------------------------------------------------------------------- scenes
 def _drawing(p):
     """Drawing spec (``jaxmech.drawing``): screw B0-B with the nut's line, the flap plate
     A-F-G-D, both arc slots about A0 (the arcs their pins sweep), the chord A_i A_f of the
     design method (fixed points), traced A and D, transmission angle at A (A0-A-B0)."""
-    pn = {k: np.asarray(p[k], float) for k in _PARAMS}
+    pn = {k: np.asarray(p[k], float) for k in PARAM_NAMES}
     g = geometry(pn)
     return {
         "links": [("B0", "B"), ("A", "F"), ("F", "G"), ("G", "D"), ("D", "A")],
@@ -580,7 +376,7 @@ def _drawing(p):
 
 def _stroke(p):
     """(s34_i, s34_f) in m; traceable (sweeps call it under jit)."""
-    s34_i, s34_f, _ = _stroke_ends(p)
+    s34_i, s34_f, _ = stroke_ends(p)
     return s34_i, s34_f
 
 
@@ -601,7 +397,7 @@ def scene_for(scenario: str = "cruise") -> Scene:
         summary=f"circular-arc-track flap, screw jack at 35 mm/s, {scenario} air moment {_moments(scenario)} (Arslan 2022)",
         mechanism=MECHANISM,
         defaults=defaults,
-        guess=_guess,
+        guess=initial_pose,
         stroke=_stroke,
         speed=0.035,
         units={"s34": "m", "theta12": "rad", "theta13": "rad", "x2": "m", "y2": "m"},

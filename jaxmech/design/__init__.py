@@ -1,0 +1,39 @@
+"""Design studies on whole batches: sensitivities, peaks over a stroke, multi-start fits.
+
+A *figure of merit* is any scalar function of one design's parameters, ``f(p)``, for
+example the peak motor torque or the final flap angle.  Its derivatives come from the
+implicit function theorem through the position solve (``jaxmech.solve``), never from
+differentiating Newton iterations, so ``jax.grad`` of a figure is exact to the solver's
+tolerance and costs about one extra stroke evaluation whatever the number of parameters.
+
+- ``scene_figure`` builds a figure from a scene and a reduction of its table columns.
+- ``sensitivities`` evaluates ``jax.vmap(jax.value_and_grad(figure))`` over a batch of
+  designs and reports gradients and elasticities ``(p/f) df/dp``.
+- ``peak`` takes a maximum over the stroke in a way whose gradient is right.
+- ``fit`` runs optax from a batch of starting designs at once (multi-start) and says which
+  start won and why each of the others stopped.
+
+Failed designs (a sample that does not converge) are masked with ``jnp.where`` on the
+*inputs* of every later computation, so a failure gives a NaN value and a NaN gradient
+for that design alone, never a NaN in the gradient of a batch.
+"""
+
+from .figures import SceneFigure as SceneFigure
+from .figures import peak as peak
+from .figures import scene_figure as scene_figure
+from .fitting import FitResult as FitResult
+from .fitting import StopReason as StopReason
+from .fitting import fit as fit
+from .sensitivities import Sensitivities as Sensitivities
+from .sensitivities import sensitivities as sensitivities
+
+__all__ = [
+    "FitResult",
+    "SceneFigure",
+    "Sensitivities",
+    "StopReason",
+    "fit",
+    "peak",
+    "scene_figure",
+    "sensitivities",
+]
