@@ -130,7 +130,7 @@ def _offsets(m: int) -> np.ndarray:
     return np.random.default_rng(20261124).uniform(-1.0, 1.0, (_STARTS, m))
 
 
-def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
+def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False):
     """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
     from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
 
@@ -147,6 +147,8 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
     wins a tie.  Angles are then moved by whole turns to lie within half a turn of the
     guess (where the equations allow it: checked on the residual), so a stroke's angles are
     continuous as numbers.
+
+    ``inputs_finite``: as for ``newton`` (the stroke program sanitises its inputs once).
 
     Returns ``(q, status, steps, residual, cond, branch)`` like ``newton`` (no ``flipped``).
     """
@@ -166,7 +168,7 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target):
         j, best = carry
         g = where(j < 2, g0, table[jnp.clip(j - 2, 0, _STARTS - 1)])
         cap = where(j == 1, 0.1 * opts.max_step, opts.max_step).astype(dtype)
-        q, st, steps, rn, cond, br, _ = newton(mech, opts, u, p, g, target, cap, skip=~wanted(carry))
+        q, st, steps, rn, cond, br, _ = newton(mech, opts, u, p, g, target, cap, skip=~wanted(carry), inputs_finite=inputs_finite)
         new = (q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br, score(st))
         take = wanted(carry) & (new[-1] > best[-1])
         return j + 1, jax.tree_util.tree_map(lambda a, b: where(take, a, b), new, best)
@@ -218,10 +220,12 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     # gradient.
     us_fin = jnp.all(jnp.isfinite(us), axis=-1)
     us_s = where(jnp.isfinite(us), us, 0.0)
-    p_fin = jnp.ones((d,), bool)
-    for v in p.values():
-        p_fin = p_fin & jnp.isfinite(v)
-    p_s = {k_: where(jnp.isfinite(v), v, 1.0) for k_, v in p.items()}
+    # The parameters as one (n_params, D) array: one reduction says which designs are finite.
+    # Tested one by one, XLA's CPU fusion copied the chain of tests into every consumer of
+    # the status (flap_msd, 29 parameters: 1,000 is-finite instructions in the program).
+    pv = jnp.stack(list(p.values())) if p else jnp.zeros((0, d), dtype)
+    p_fin = jnp.all(jnp.isfinite(pv), axis=0)
+    p_s = dict(zip(p, unfused(where(jnp.isfinite(pv), pv, 1.0)))) if p else {}
     ps = jax.tree_util.tree_map(stop, p_s)
     g0 = stop(where(jnp.isfinite(guess), guess, 0.0))
 
@@ -250,16 +254,12 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
 
         return jax.vmap(one)(u_blk)
 
-    def per_block(fn, u_blk, *args):
-        """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points (inner)."""
-        return jax.vmap(lambda u_d, p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_d, *pts))(u_blk, ps, b0, *args)
-
     def per_point(fn, u_blk, *args):
-        """``per_block`` as one ``vmap`` over designs x points (``(D, k, ...)`` in and out), for
-        the robust kernel: JAX batches a ``while_loop`` (Newton's, ``assemble``'s) by re-tracing
-        its body to a fixed point at every ``vmap`` level, and two nested levels were half the
-        stroke's trace.  (The checked step keeps the nested form: its parameter terms are then
-        computed once per design, 15% of a four-bar stroke's run time.)"""
+        """``fn(u, p, b0, *per-point args)`` over the block's points of every design, as one
+        ``vmap`` over designs x points (``(D, k, ...)`` in and out): JAX batches a function
+        once per ``vmap`` level, and a ``while_loop`` (Newton's, ``assemble``'s) by re-tracing
+        its body to a fixed point at each; two nested levels were half the stroke's trace.
+        (The parameters are repeated per point: no change in run time measured.)"""
         kk = u_blk.shape[1]
         flat = lambda x: x.reshape((d * kk,) + x.shape[2:])  # noqa: E731
         rep = lambda x: jnp.repeat(x, kk, axis=0)  # noqa: E731
@@ -271,7 +271,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         checked step failed somewhere: one ``lax.cond`` per block), from several starts."""
 
         def one(u, p_, b_, g_, q_a):
-            q, st, steps, rn, cond, br = assemble(mech, options, u, p_, g_, q_a, b_)
+            q, st, steps, rn, cond, br = assemble(mech, options, u, p_, g_, q_a, b_, inputs_finite=True)
             return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
 
         return per_point(one, u_blk, g, jnp.broadcast_to(q_a[:, None], g.shape))
@@ -287,7 +287,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     def scan_fn(carry, u_blk):
         q_a, d1_a, d2_a, u_a = carry
         g = jax.vmap(guesses)(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
-        q1, qf, ok, rn, cond, br = per_block(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
+        q1, qf, ok, rn, cond, br = per_point(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
         status = where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
 
         def with_derivatives(q_eval, good):

@@ -96,7 +96,7 @@ class _NewtonState(NamedTuple):
     crossed: jax.Array  # whether the guard refused a better step
 
 
-def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None, skip=None):
+def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None, skip=None, inputs_finite: bool = False):
     """Damped Newton / Levenberg-Marquardt for one sample (no gradients): the one kernel that
     serves single solves, stroke anchors and every stroke point.
 
@@ -114,6 +114,10 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
 
     ``max_step`` (may be traced) overrides ``opts.max_step``; ``skip`` (traced bool) runs no
     iteration at all (under ``vmap``, a lane whose answer is not wanted then costs nothing).
+    ``inputs_finite``: the caller has replaced non-finite inputs and parameters already (a
+    stroke does, once per design), so only the guess is checked here.  A check of every
+    parameter is a chain of ``is-finite`` tests that XLA's CPU fusion copies into each
+    consumer: for flap_msd's 29 parameters, a thousand of the stroke program's instructions.
 
     Returns ``(q, status, steps, residual, cond, branch, flipped)``; ``q`` is the last
     iterate (not masked), ``flipped`` the ``Solution.flipped`` bit mask.  A closed residual (``<= ftol``) whose step cannot meet ``xtol`` means the
@@ -194,7 +198,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
         done = converged | stalled | ~jnp.isfinite(rn)
         return _NewtonState(st.k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled, st.guard & ~lift, crossed)
 
-    inputs_ok = all_finite((u, p, guess))
+    inputs_ok = all_finite(guess) if inputs_finite else all_finite((u, p, guess))
     zero = jnp.zeros((), dtype)
     init = _NewtonState(
         k=jnp.zeros((), jnp.int32), q=guess, r=jnp.zeros((m,), dtype), rn=jnp.asarray(jnp.inf, dtype), js=eye,
