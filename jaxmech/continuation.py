@@ -214,11 +214,15 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     d = guess.shape[0]
     dtype = guess.dtype
     n, dof = us.shape[-2:]
-    us = jnp.broadcast_to(us, (d, n, dof))
+    # A stroke shared by every design stays one array: a block's inputs are then not batched
+    # over the designs, which keeps the steady-state program as small as it was (a shared
+    # stroke broadcast per design cost 8-70% of the run time, measured).
+    shared = us.ndim == 2
+    ax = None if shared else 0  # the design axis of a block's inputs
     # Non-finite inputs and parameters are replaced once, here, by harmless values (their
     # samples are flagged): no derivative code ever sees a NaN that could leak into a batch
     # gradient.
-    us_fin = jnp.all(jnp.isfinite(us), axis=-1)
+    us_fin = jnp.all(jnp.isfinite(us), axis=-1)  # (N,) or (D, N)
     us_s = where(jnp.isfinite(us), us, 0.0)
     # The parameters as one (n_params, D) array: one reduction says which designs are finite.
     # Tested one by one, XLA's CPU fusion copied the chain of tests into every consumer of
@@ -233,12 +237,14 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     # from the user's guess); blocks 1.. cover points 1..n-1, the last padded by repetition.
     k = _block_size(n, options.anchors)
     nblk = -(-(n - 1) // k) if n > 1 else 0
-    rest = jnp.concatenate([us_s[:, 1:], jnp.broadcast_to(us_s[:, -1:], (d, nblk * k - (n - 1), dof))], axis=1) if n > 1 else us_s[:, :0]
-    blocks = jnp.concatenate([jnp.broadcast_to(us_s[:, :1], (d, k, dof)), rest], axis=1)
-    blocks = jnp.moveaxis(blocks.reshape(d, nblk + 1, k, dof), 1, 0)  # (nblk + 1, D, k, dof)
+    lead = us_s.shape[:-2]  # () or (D,)
+    rest = jnp.concatenate([us_s[..., 1:, :], jnp.broadcast_to(us_s[..., -1:, :], lead + (nblk * k - (n - 1), dof))], axis=-2) if n > 1 else us_s[..., :0, :]
+    blocks = jnp.concatenate([jnp.broadcast_to(us_s[..., :1, :], lead + (k, dof)), rest], axis=-2)
+    blocks = jnp.moveaxis(blocks.reshape(lead + (nblk + 1, k, dof)), -3, 0)  # (nblk + 1, [D,] k, dof)
+    u_first = jnp.broadcast_to(us_s[..., 0, :], (d, dof))
 
     if mech.branch is not None:
-        b0 = jnp.sign(jax.vmap(lambda g_, u_, p_: mech.branch_value(g_, u_, p_))(g0, us_s[:, 0], ps))
+        b0 = jnp.sign(jax.vmap(lambda g_, u_, p_: mech.branch_value(g_, u_, p_))(g0, u_first, ps))
     else:
         b0 = jnp.zeros((d,), dtype)
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
@@ -254,16 +260,21 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
 
         return jax.vmap(one)(u_blk)
 
+    def per_block(fn, u_blk, *args):
+        """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points
+        (inner), ``(D, k, ...)`` in and out: what depends on the parameters alone is computed
+        once per design (the checked step: 8% of the steady-state stroke, measured)."""
+        return jax.vmap(lambda u_d, p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_d, *pts), (ax, 0, 0) + (0,) * len(args))(u_blk, ps, b0, *args)
+
     def per_point(fn, u_blk, *args):
-        """``fn(u, p, b0, *per-point args)`` over the block's points of every design, as one
-        ``vmap`` over designs x points (``(D, k, ...)`` in and out): JAX batches a function
-        once per ``vmap`` level, and a ``while_loop`` (Newton's, ``assemble``'s) by re-tracing
-        its body to a fixed point at each; two nested levels were half the stroke's trace.
-        (The parameters are repeated per point: no change in run time measured.)"""
-        kk = u_blk.shape[1]
+        """``per_block`` as one ``vmap`` over designs x points (the parameters repeated per
+        point), for the robust kernel: JAX batches a ``while_loop`` (Newton's, ``assemble``'s)
+        by re-tracing its body to a fixed point at every ``vmap`` level, and two nested levels
+        were half the stroke's trace."""
+        kk = u_blk.shape[-2]
         flat = lambda x: x.reshape((d * kk,) + x.shape[2:])  # noqa: E731
         rep = lambda x: jnp.repeat(x, kk, axis=0)  # noqa: E731
-        out = jax.vmap(fn)(flat(u_blk), jax.tree_util.tree_map(rep, ps), rep(b0), *map(flat, args))
+        out = jax.vmap(fn)(flat(jnp.broadcast_to(u_blk, (d, kk, dof))), jax.tree_util.tree_map(rep, ps), rep(b0), *map(flat, args))
         return jax.tree_util.tree_map(lambda x: x.reshape((d, kk) + x.shape[1:]), out)
 
     def robust(u_blk, g, q_a):
@@ -279,22 +290,22 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     # A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
     @jax.jit
     def derivatives_of(q, u, p_, ok):
-        return jax.vmap(jax.vmap(lambda q_, u_, p1, ok_: root_derivatives(mech, q_, u_, p1, ok_), (0, 0, None, 0)))(q, u, p_, ok)
+        return jax.vmap(jax.vmap(lambda q_, u_, p1, ok_: root_derivatives(mech, q_, u_, p1, ok_), (0, 0, None, 0)), (0, ax, 0, 0))(q, u, p_, ok)
 
     def derivatives(q, u, ok):
         return derivatives_of(q, u, ps, ok)
 
     def scan_fn(carry, u_blk):
         q_a, d1_a, d2_a, u_a = carry
-        g = jax.vmap(guesses)(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
-        q1, qf, ok, rn, cond, br = per_point(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
+        g = jax.vmap(guesses, (0, 0, 0, 0, 0, 0, 0, ax))(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
+        q1, qf, ok, rn, cond, br = per_block(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
         status = where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
 
         def with_derivatives(q_eval, good):
             if derivs:  # every point's dq/du and d2q/du2 (the last one's also serve the next anchor)
                 d1, d2 = derivatives(where(good[..., None], q_eval, 0.0), u_blk, good)
                 return d1, d2, d1[:, -1], d2[:, -1]
-            e1, e2 = derivatives(where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[:, -1:], good[:, -1:])
+            e1, e2 = derivatives(where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[..., -1:, :], good[:, -1:])
             return None, None, e1[:, 0], e2[:, 0]
 
         # derivatives at the checked step's iterate share its sines and cosines
@@ -322,15 +333,15 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
         # block restarts from that pose instead of a series extrapolated across the gap.
         last_ok = status[:, -1] == Status.CONVERGED
         q_next = where(last_ok[:, None], qf[:, -1], q_a)
-        u_next = where(last_ok[:, None], u_blk[:, -1], u_a)
+        u_next = where(last_ok[:, None], u_blk[..., -1, :], u_a)
         return (q_next, e1, e2, u_next), (qf, status, steps, rn, cond, br, d1, d2)
 
-    init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), us_s[:, 0])
+    init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), u_first)
     _, out = jax.lax.scan(scan_fn, init, blocks)
     # (nblk + 1, D, k, ...) -> (D, n, ...): point 0 is block 0's last entry
     out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n], out)
     q, status, steps, rn, cond, br, d1, d2 = out
-    inputs_ok = p_fin[:, None] & us_fin[:, :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
+    inputs_ok = p_fin[:, None] & us_fin[..., :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
     status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
     flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(b0, br) if mech.branch is not None else jnp.zeros(status.shape, jnp.int32)
     flipped = where(status == Status.BRANCH, flipped, 0)
@@ -338,12 +349,12 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     q_star = where(ok[..., None], q, jnp.nan)
 
     # Attach the roots to (u, p): derivatives by the implicit function theorem.
-    u_out = us_s[:, :n]
-    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)))(q_star, ok, u_out, p)
+    u_out = us_s[..., :n, :]
+    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, ax, 0))(q_star, ok, u_out, p)
     if derivs:
         d1 = where(ok[..., None, None], d1, jnp.nan)
         d2 = where(ok[..., None, None, None], d2, jnp.nan)
-        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)))(d1, d2, q_star, ok, u_out, p)
+        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, ax, 0))(d1, d2, q_star, ok, u_out, p)
     res = (q, status, steps, rn, cond, br, flipped, d1, d2)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 

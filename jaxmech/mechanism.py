@@ -217,7 +217,7 @@ class Mechanism:
         q = jax.ShapeDtypeStruct((self.m,), dtype)
         u = jax.ShapeDtypeStruct((self.dof,), dtype)
         p = {n: jax.ShapeDtypeStruct((), dtype) for n in self.params}
-        fns = {"residual": self._residual}
+        fns = {"residual": self.residual}
         if self.branch is not None:
             fns["branch"] = self.branch_value
         for name in self.points:
@@ -286,17 +286,7 @@ class Mechanism:
         """``Phi(q, u, p)``: the constraint residuals as a real vector of length ``m`` (m or -).
 
         Complex loops contribute (real, imaginary); real equations contribute one entry.
-        Under a trace this is one nested ``jit`` call: the solver evaluates the residual in a
-        dozen places (Newton, the checked step, the derivatives, under ``jvp`` and ``vmap``),
-        and JAX then traces the user's equations once and reuses that trace and its
-        transformations (flap_msd's stroke program: 0.74 -> 0.68 s of tracing).  XLA inlines
-        the call, so the compiled program is the same.
         """
-        if not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((q, u, dict(p)))):
-            return self._residual(q, u, p)
-        return _traced_residual(self, q, u, dict(p))
-
-    def _residual(self, q, u, p):
         eqs = [] if self.constraints is None else self.constraints(self.vars_q(q), self.vars_u(u), self.vars_p(p))
         if not isinstance(eqs, (list, tuple)):
             eqs = [eqs]
@@ -414,8 +404,3 @@ def check_parameters(owner: str, p: Mapping, names: Sequence[str], lengths: Sequ
             raise ValueError(f"{owner}: parameter {n!r} must be finite, got {show_value(v)}")
         if n in lengths and n not in signed and np.any(arr <= 0):
             raise ValueError(f"{owner}: length {n!r} must be positive, got {show_value(v)}; give a positive length in metres")
-
-
-@functools.partial(jax.jit, static_argnums=0)
-def _traced_residual(mech: Mechanism, q, u, p):
-    return mech._residual(q, u, p)
