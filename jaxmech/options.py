@@ -28,7 +28,8 @@ class SolverOptions:
       declared stalled (``INFEASIBLE``).
     - `anchors`: stroke points solved in sequence (``solve_stroke``); the points between
       two anchors are solved together from the earlier one's predictor.  More anchors:
-      safer near toggles, slower.
+      safer near toggles, slower.  A scene's stroke (``run_scene``, sweeps, design) is
+      solved with ``scenes.evaluation.SCENE_OPTIONS``: 256 anchors.
     - `dtype`: require this floating dtype (``"float64"`` raises if x64 is off or an
       argument is float32); ``None`` follows the arguments.
     """

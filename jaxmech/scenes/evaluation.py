@@ -110,7 +110,7 @@ def scene_outputs(scene, p, mo: Motion) -> dict:
 
 
 # A scene's units per output, in its order, noted when its program is traced (a unit is not
-# an array); a process that loads the stored program traces the outputs' shapes instead.
+# an array); a process that loads the stored program reads them from beside it instead.
 _UNITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
