@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 from collections.abc import Callable, Mapping
 
 import jax
@@ -70,11 +71,12 @@ class Scene:
                     f"undescribed {missing}, not a default {extra}"
                 )
 
-    @property
+    @functools.cached_property
     def program_key(self) -> str | None:
         """What identifies this scene in a stored program: its registry name when it is the
         registry's scene of that name (its code is the package's, which the stored programs'
-        key covers); None for any other scene (then nothing is stored for it)."""
+        key covers); None for any other scene (then nothing is stored for it).  Looked up
+        once per scene object (a frozen scene cannot become another)."""
         from . import get_scene, scene_names  # the registry imports this module
 
         return f"scene {self.name}" if self.name in scene_names() and get_scene(self.name) is self else None

@@ -24,7 +24,7 @@ from ..scenes.evaluation import motion_and_outputs, output_units, scene_motion
 from ..xla import jit
 from .evaluate import Figures, batch_columns, mask_failed, stroke_figures, table_columns
 
-__all__ = ["ChunkData", "Job", "trace_columns", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
+__all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +87,7 @@ def _chunk(scene: Scene, job: Job, p):
     return figs, status
 
 
-def trace_columns(scene: Scene, job: Job, mo, values, p) -> tuple[dict, np.ndarray]:
+def _trace_columns(scene: Scene, job: Job, mo, values, p) -> tuple[dict, np.ndarray]:
     """Masked columns ``{NAME[UNIT]: (n, N)}`` and status ``(n, N)`` (host numpy) from the
     trace-mode kernel's motion and output values, as ``SceneResult.table`` cuts them."""
     units = output_units(scene, job.points, job.options, p) if values else {}
@@ -259,7 +259,7 @@ def _run_kernel(scene: Scene, job: Job, params: dict[str, np.ndarray]):
     out = compiled({k: jax.device_put(v, sharding) for k, v in padded.items()})
     if job.outputs == "vmap" and job.figures is None:
         mo, values = jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], out)
-        return trace_columns(scene, job, mo, values, {k: v[:n] for k, v in padded.items()})
+        return _trace_columns(scene, job, mo, values, {k: v[:n] for k, v in padded.items()})
     if job.outputs == "vmap":
         cols, status = out
         cols = {k: np.asarray(v)[:n].copy() for k, v in cols.items()}  # writable host copies
