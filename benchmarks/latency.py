@@ -10,8 +10,8 @@ is recorded too.  Beside them, in the same run: the seeds' method for the four-b
 scipy ``fsolve`` loop with 2x2 solves for velocity and acceleration, as a new user would
 write it) and pylinkage's first call (when installed), each as a whole process.
 
-The warm run of a case also counts the exported programs it loaded (``jaxmech.exported``:
-a new process calls the stored program without tracing it); ``--baseline DIR`` runs every
+The warm run of a case also counts the stored executables it loaded (``jaxmech.stored``:
+a new process calls the stored executable without tracing, lowering or compiling it); ``--baseline DIR`` runs every
 case a second time, interleaved, with the jaxmech package of another checkout (``DIR``, e.g.
 ``git worktree add DIR <commit>``), so before/after figures are taken side by side under the
 same load; the load average is recorded around every case.
@@ -62,11 +62,13 @@ def mark(name, t0):
 
 _EPILOGUE = """
 try:
-    from jaxmech.exported import export_stats
-    EXPORTS = export_stats()
-except ImportError:  # a checkout from before the export cache (--baseline)
-    EXPORTS = None
-out = {"exported_programs": EXPORTS, "import_s": t_import, "job_s": time.perf_counter() - t_start - t_import, "marks": MARKS,
+    from jaxmech.stored import store_stats as _stats
+except ImportError:  # a checkout from before the stored executables (--baseline)
+    try:
+        from jaxmech.exported import export_stats as _stats
+    except ImportError:  # ... or from before the export cache
+        _stats = dict
+out = {"stored_programs": _stats(), "import_s": t_import, "job_s": time.perf_counter() - t_start - t_import, "marks": MARKS,
        "trace_s": EVENTS.get("/jax/core/compile/jaxpr_trace_duration", 0.0),
        "lower_s": EVENTS.get("/jax/core/compile/jaxpr_to_mlir_module_duration", 0.0),
        "xla_compile_s": EVENTS.get("/jax/core/compile/backend_compile_duration", 0.0),

@@ -28,7 +28,7 @@ import numpy as np
 
 from .linalg import cond1, small_max, small_norm, solve_blocks, where
 from .xla import jit, unfused
-from .exported import cached_call
+from .stored import cached_call
 from .mechanism import Mechanism
 from .structure import blocks
 from .implicit import attach_derivatives, implicit_root, root_derivatives
@@ -446,7 +446,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     nb = bucket(n)
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
-    # a new process runs the stored exported program where exactly equivalent (concrete arguments)
+    # a new process runs the stored executable where exactly equivalent (concrete arguments)
     out = cached_call(_stroke_program, (mech, options, bool(derivs), single), (us_, pf, gf))
     if not traced:
         out = _backward(mech, options, bool(derivs), single, us_, pf, gf, out, n)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 from collections.abc import Callable, Mapping, Sequence
 
 import jax
@@ -21,7 +20,7 @@ import jax.numpy as jnp
 
 from .mechanism import Mechanism
 from .continuation import stroke
-from .exported import cached_call
+from .stored import cached_call
 from .implicit import implicit_root, root_derivatives
 from .options import SolverOptions
 from .xla import jit
@@ -153,15 +152,6 @@ class Motion:
         if name in self.inputs:
             return self.u[..., self.inputs.index(name)]
         raise KeyError(f"unknown name {name!r}; coordinates {self.coords}, inputs {self.inputs}")
-
-
-# A stored program (``jaxmech.exported``) may return a Motion: its static fields are names.
-jax.export.register_pytree_node_serialization(
-    Motion,
-    serialized_name="jaxmech.Motion",
-    serialize_auxdata=lambda aux: json.dumps(aux).encode(),
-    deserialize_auxdata=lambda data: tuple(tuple(x) for x in json.loads(data)),
-)
 
 
 def chain_rule(d1, d2, u_dot, u_ddot):

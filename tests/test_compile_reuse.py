@@ -88,23 +88,23 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 import jaxmech as jm
-from jaxmech.exported import export_stats
+from jaxmech.stored import store_stats
 sys.path.insert(0, sys.argv[2])
 from test_compile_reuse import P, fourbar
 sol, d1, d2 = jm.stroke_kinematics(fourbar(), np.linspace(0.0, 2 * np.pi, 361), P, np.array([0.4, 1.7]))
 np.savez(sys.argv[1], q=sol.q, status=sol.status, d1=d1, d2=d2)
-print(json.dumps(export_stats()))
+print(json.dumps(store_stats()))
 """
 
 
 def test_a_new_process_runs_the_stored_program_bit_for_bit(tmp_path, monkeypatch):
-    """A second process loads the exported stroke program (no tracing) and gives the same
+    """A second process loads the stored stroke executable (no tracing) and gives the same
     bits as the first process and as the plain jitted program."""
-    from jaxmech.exported import export_dir
+    from jaxmech.stored import store_dir
 
     us, g = np.linspace(0.0, 2 * np.pi, 361), np.array([0.4, 1.7])
-    assert export_dir() is not None  # the suite runs with the compilation cache on
-    first = jm.stroke_kinematics(fourbar(), us, P, g)  # exported (or loaded) by this process
+    assert store_dir() is not None  # the suite runs with the compilation cache on
+    first = jm.stroke_kinematics(fourbar(), us, P, g)  # stored (or loaded) by this process
     monkeypatch.setenv("JAXMECH_EXPORT_CACHE", "0")
     plain = jm.stroke_kinematics(fourbar(), us, P, g)  # traced and jitted as without the cache
     monkeypatch.delenv("JAXMECH_EXPORT_CACHE")
@@ -112,7 +112,7 @@ def test_a_new_process_runs_the_stored_program_bit_for_bit(tmp_path, monkeypatch
                          capture_output=True, text=True, timeout=300, cwd=ROOT)  # fmt: skip
     assert out.returncode == 0, out.stderr
     stats = json.loads(out.stdout.strip().splitlines()[-1])
-    assert stats["loaded"] >= 1 and stats["exported"] == 0, stats
+    assert stats["loaded"] >= 1 and stats["stored"] == 0, stats
     r = np.load(tmp_path / "r.npz")
     for res in (first, plain):
         sol, d1, d2 = res

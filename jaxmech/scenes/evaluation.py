@@ -5,7 +5,7 @@ the sweeps, ``jaxmech.design`` and the live view share.
 scene's constant-speed drive, with finite placeholders at failed samples; ``scene_outputs``
 adds the scene's outputs.  ``evaluate`` runs both as one compiled program for concrete
 parameters (the path of ``run_scene`` and of a one-design sweep, so their columns agree bit
-for bit), stored as an exported program for the next process where the scene is one of the
+for bit), stored as an executable for the next process where the scene is one of the
 registry's.
 """
 
@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from ..continuation import stroke
-from ..exported import cached_call, cached_json
+from ..stored import cached_call, cached_json
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
 from ..options import SolverOptions
@@ -130,7 +130,7 @@ def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs:
 
 def output_units(scene, points: int, options: SolverOptions, p) -> dict:
     """``{output name: unit}`` in the scene's order: noted when ``motion_and_outputs`` is
-    traced, and kept beside the stored programs (``exported.cached_json``) for a process
+    traced, and kept beside the stored programs (``stored.cached_json``) for a process
     that loads the stored program instead; traced (shapes only) where neither has it."""
     if scene not in _STORED:
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from ...actuators import ScrewJack
 from ...dynamics import Body, Gravity, Model, Moment, generalized_forces
-from ...exported import cached_call
+from ...stored import cached_call
 from ...mechanism import Mechanism, cis
 from ..base import Scene
 from ...xla import jit
@@ -336,7 +336,7 @@ def quasi_static(q, u, p: Mapping) -> dict:
     """
     q, u = jnp.asarray(q), jnp.asarray(u)
     pj = {k: jnp.asarray(p[k], q.dtype) for k in PARAM_NAMES}
-    return cached_call(_quasi_static_batch, (), (q, u, pj))  # a new process skips tracing (jaxmech.exported)
+    return cached_call(_quasi_static_batch, (), (q, u, pj))  # a new process skips tracing (jaxmech.stored)
 
 
 def _outputs(p, mo):

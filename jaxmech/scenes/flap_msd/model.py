@@ -14,7 +14,7 @@ from ...actuators import DCMotor
 from ...dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
 from ...kinematics import Motion, chain_rule
 from ...mechanism import Mechanism, cis
-from ...exported import cached_call
+from ...stored import cached_call
 from ..base import Scene
 from ...xla import jit
 
@@ -284,7 +284,7 @@ def torque(p: Mapping, motion: Motion):
     dt = motion.q.dtype
     pj = {k: jnp.asarray(v, dt) for k, v in p.items()}
     args = (pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt), motion.dq_du, motion.d2q_du2)
-    return cached_call(_torque_batch, (), args)  # a new process skips tracing (jaxmech.exported)
+    return cached_call(_torque_batch, (), args)  # a new process skips tracing (jaxmech.stored)
 
 
 def voltage(p: Mapping, motion: Motion, torque_values=None):

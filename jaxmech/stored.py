@@ -1,0 +1,281 @@
+"""Stored executables: a new process runs a library program without tracing, lowering or
+compiling it.
+
+JAX's persistent compilation cache (``jaxmech.cache``) skips XLA's compile in a new process,
+but not the tracing and lowering that come before it (its key is the lowered module): for a
+scene's program those take a second or more of Python.  So the first process that runs a
+jitted library program with concrete arguments compiles it once (``lower().compile()``, the
+same executable the jitted call would build), runs it, and stores that executable
+(``jax.experimental.serialize_executable``); a later process loads it and calls it directly.
+
+A stored executable is used only where it is exactly what the jitted function would run:
+
+- every argument is concrete (no tracer: under ``jax.grad``, ``jit`` or ``vmap`` the normal
+  path runs, so custom derivative rules, which an executable does not carry, are never
+  needed);
+- the key holds everything that determines the program: the function's name, its static
+  arguments (a ``Mechanism`` by its traced-program fingerprint, a registry scene by its name,
+  options and flags by value, pytree structures whose node types are jaxmech's or Python's
+  own), the structure, shapes, dtypes and weak types of the arguments, the JAX flags that
+  change tracing (x64, promotion and precision defaults), ``XLA_FLAGS``, the devices, the
+  backend and its version, the jax and jaxlib versions, this machine's processor (an
+  executable is native code for its instruction set), and a hash of every source file of
+  the jaxmech package (an edited library never reuses a stale program); a static argument
+  that cannot be put in such a key (a user's function, a mechanism whose functions do not
+  trace) means nothing is stored, only the normal path;
+- files are written atomically (a temporary file, then a rename) with a SHA-256 of their
+  contents, checked before loading; any failure to compile on its own, store, read or load
+  falls back to the normal jitted call.
+
+The files are pickles of compiled code, like JAX's own compilation cache: load them only
+from a folder you trust (your own cache folder, the default).
+
+Where: ``jaxmech-executables/`` inside the compilation cache folder in use (see
+``jaxmech.cache``); nothing is stored or read when that cache is off, and
+``JAXMECH_COMPILE_CACHE=0`` turns both off (``JAXMECH_EXPORT_CACHE=0``: this one only, read
+at every call).  Within a process, a program serves every later call with the same key
+(compiled once, like the jitted function it stands for).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import os
+import pickle
+import platform
+import tempfile
+import threading
+from pathlib import Path
+
+import jax
+import jaxlib
+from jax.experimental.serialize_executable import deserialize_and_load, serialize
+
+from .cache import compile_cache_dir, switched_off
+
+__all__ = ["cached_call", "cached_json", "store_dir", "store_stats", "source_hash", "static_token"]
+
+# What ``cached_call`` did, per process: loaded (a stored executable was used), stored (one
+# was written), fallback (the normal path ran where a key existed but compiling failed).
+_STATS = {"loaded": 0, "stored": 0, "fallback": 0}
+# (folder, key) -> the compiled program that serves it in this process (None: use the jit path)
+_PROGRAMS: dict[tuple[str, str], object] = {}
+_FOLDER = "jaxmech-executables"
+_OFF = {"0", "off", "false", "no"}
+# JAX flags that change what a traced program is
+_FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
+
+
+def store_stats() -> dict[str, int]:
+    """Counts for this process: ``loaded`` (stored executables used), ``stored`` (written), ``fallback``."""
+    return dict(_STATS)
+
+
+def store_dir() -> Path | None:
+    """The folder of stored executables, or None when it or the compilation cache is off."""
+    cache = compile_cache_dir()
+    if cache is None or switched_off() or os.environ.get("JAXMECH_EXPORT_CACHE", "1").strip().lower() in _OFF:
+        return None
+    return Path(cache) / _FOLDER
+
+
+@functools.cache
+def _processor() -> str:
+    """This machine's processor: its architecture and, on Linux, its instruction-set flags."""
+    flags = ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            flags = next((line for line in f if line.startswith(("flags", "Features"))), "")
+    except OSError:
+        pass
+    return hashlib.sha256(f"{platform.machine()}|{platform.processor()}|{flags}".encode()).hexdigest()
+
+
+@functools.cache
+def source_hash() -> str:
+    """SHA-256 of every ``.py`` file of the jaxmech package (relative path and bytes)."""
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def _jaxmech_type(t: type) -> bool:
+    return t.__module__ == "builtins" or t.__module__.split(".")[0] == "jaxmech"
+
+
+def static_token(x):
+    """A text that determines ``x`` as a static argument of a jaxmech program, or None when
+    there is none (a user's function, a mechanism that does not trace, a foreign pytree)."""
+    from .mechanism import Mechanism  # here: mechanism imports jax programs of its own
+
+    if x is None or isinstance(x, (bool, int, float, str)):
+        return repr(x)
+    if isinstance(x, Mechanism) or hasattr(type(x), "program_key"):  # a mechanism, a scene
+        key = x.program_key
+        return None if key is None else f"{type(x).__name__}({key})"
+    if isinstance(x, tuple):
+        parts = [static_token(v) for v in x]
+        return None if any(v is None for v in parts) else "(" + ",".join(parts) + ")"
+    if dataclasses.is_dataclass(x) and not isinstance(x, type) and _jaxmech_type(type(x)):
+        parts = [static_token(getattr(x, f.name)) for f in dataclasses.fields(x)]
+        return None if any(v is None for v in parts) else f"{type(x).__qualname__}({','.join(parts)})"
+    if isinstance(x, jax.tree_util.PyTreeDef):
+        return repr(x) if _treedef_ours(x) else None
+    return None
+
+
+def _treedef_ours(treedef) -> bool:
+    """Every node of ``treedef`` is a Python container or a jaxmech class (whose code the
+    source hash covers)."""
+    data = treedef.node_data()
+    if data is not None and not _jaxmech_type(data[0]):
+        return False
+    return all(_treedef_ours(c) for c in treedef.children())
+
+
+def _key(fn, static: tuple, args: tuple) -> str | None:
+    tokens = [static_token(s) for s in static]
+    if any(t is None for t in tokens):
+        return None
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    avals = []
+    for x in leaves:
+        if isinstance(x, jax.core.Tracer):
+            return None
+        a = jax.typeof(x)
+        avals.append((a.shape, str(a.dtype), a.weak_type))
+    flags = tuple(getattr(jax.config, f, None) for f in _FLAGS)
+    devices = [(d.platform, d.device_kind, d.id) for d in jax.devices()]
+    material = (
+        f"{fn.__module__}.{fn.__qualname__}", tokens, repr(treedef), avals, flags, os.environ.get("XLA_FLAGS", ""),
+        jax.default_backend(), devices, jax.devices()[0].client.platform_version, _processor(),
+        jax.__version__, jaxlib.__version__, source_hash(),
+    )
+    return hashlib.sha256(repr(material).encode()).hexdigest()
+
+
+def _write(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _load(path: Path):
+    """The stored executable at ``path`` (checked against its SHA-256), or None."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    digest, payload = data[:32], data[32:]
+    if hashlib.sha256(payload).digest() != digest:  # truncated or damaged: never loaded
+        return None
+    try:
+        return deserialize_and_load(*pickle.loads(payload))
+    except Exception:  # from another version or machine after all: compile it anew
+        return None
+
+
+def _store(path: Path, compiled) -> None:
+    try:
+        payload = pickle.dumps(serialize(compiled))
+        _write(path, hashlib.sha256(payload).digest() + payload)
+        _STATS["stored"] += 1
+    except Exception:  # not serialisable, or a read-only cache: used in this process only
+        pass
+
+
+# An executable that JAX loaded from its own persistent cache must not be stored again:
+# serialised a second time, it lost kernels ("Function ... not found" when run, jaxlib 0.10).
+# So the programs stored here are compiled with one more XLA option, set to its default value
+# (the same executable; a different key in JAX's cache, so a plain jitted call's cache entry
+# is never what this module compiles), and a hit in JAX's cache all the same (this module's
+# own entry, whose stored file was deleted) is counted per thread and not stored.
+_DISTINCT = {"xla_embed_ir_in_executable": False}
+_HITS = threading.local()
+
+
+def _count_hit(event: str, **_) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _HITS.n = getattr(_HITS, "n", 0) + 1
+
+
+jax.monitoring.register_event_listener(_count_hit)
+
+
+def _compile(fn, static: tuple, args: tuple):
+    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
+    before = getattr(_HITS, "n", 0)
+    compiled = fn.lower(*static, *args).compile(_DISTINCT)
+    return compiled, getattr(_HITS, "n", 0) == before
+
+
+def cached_call(fn, static: tuple, args: tuple):
+    """``fn(*static, *args)`` for a ``jit`` function whose static arguments come first, by its
+    stored executable where that is exactly equivalent (see the module docstring), else by
+    ``fn`` itself.  The first call of a key compiles ``fn`` once, runs it, then stores it."""
+    folder = store_dir()
+    if folder is None or jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
+        return fn(*static, *args)
+    key = _key(fn, static, args)
+    if key is None:
+        return fn(*static, *args)
+    slot = (str(folder), key)  # a process may switch cache folders: each gets its own file
+    path = folder / f"{key}.jaxexec"
+    fresh = None
+    if slot not in _PROGRAMS:
+        prog = _load(path)
+        if prog is not None:
+            _STATS["loaded"] += 1
+        else:
+            try:
+                prog, storable = _compile(fn, static, args)
+            except Exception:  # e.g. inside a user's trace: the jit path serves this key
+                prog, storable = None, False
+            fresh = prog if storable else None
+        _PROGRAMS[slot] = prog
+    prog = _PROGRAMS[slot]
+    if prog is not None:
+        try:
+            out = prog(*args)
+        except Exception:  # e.g. an executable the runtime rejects: never again this process
+            _PROGRAMS[slot] = None
+        else:
+            if fresh is not None:  # stored while the answer runs (dispatch is asynchronous)
+                _store(path, fresh)
+            return out
+    _STATS["fallback"] += 1
+    return fn(*static, *args)
+
+
+def cached_json(label: str, static: tuple, compute):
+    """``compute()`` (a JSON value determined by the static arguments ``static`` and the
+    package's source, e.g. the units of a scene's outputs, which a stored executable does not
+    return), kept beside the stored programs so a new process need not trace to know it;
+    ``compute()`` itself when nothing can be stored or read."""
+    folder = store_dir()
+    tokens = [static_token(x) for x in static]
+    if folder is None or any(t is None for t in tokens):
+        return compute()
+    key = hashlib.sha256(repr((label, tokens, source_hash(), jax.__version__)).encode()).hexdigest()
+    path = folder / f"{key}.json"
+    try:
+        return json.loads(path.read_text())
+    except Exception:  # absent or unreadable: compute it and store it
+        pass
+    value = compute()
+    try:
+        _write(path, json.dumps(value).encode())
+    except Exception:  # a read-only cache: computed again next time
+        pass
+    return value
