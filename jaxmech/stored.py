@@ -197,11 +197,13 @@ def _store(path: Path, compiled) -> None:
 
 # An executable that JAX loaded from its own persistent cache must not be stored again:
 # serialised a second time, it lost kernels ("Function ... not found" when run, jaxlib 0.10).
-# So the programs stored here are compiled with one more XLA option, set to its default value
-# (the same executable; a different key in JAX's cache, so a plain jitted call's cache entry
-# is never what this module compiles), and a hit in JAX's cache all the same (this module's
-# own entry, whose stored file was deleted) is counted per thread and not stored.
-_DISTINCT = {"xla_embed_ir_in_executable": False}
+# So a program stored here is compiled with one more XLA option whose value is drawn from
+# this module's key: ``xla_debug_buffer_assignment_show_max``, how many buffers a debug
+# listing of the buffer assignment shows (default 15), set to 2**30 and up.  The executable
+# is the same, while its entry in JAX's cache is this key's own (an edited library whose
+# program did not change is a new key: it must not meet the old key's entry).  A hit there
+# all the same (this key's own entry, whose stored file was deleted) is counted per thread,
+# and that executable is not stored.
 _HITS = threading.local()
 
 
@@ -213,10 +215,10 @@ def _count_hit(event: str, **_) -> None:
 jax.monitoring.register_event_listener(_count_hit)
 
 
-def _compile(fn, static: tuple, args: tuple):
+def _compile(fn, static: tuple, args: tuple, key: str):
     """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
     before = getattr(_HITS, "n", 0)
-    compiled = fn.lower(*static, *args).compile(_DISTINCT)
+    compiled = fn.lower(*static, *args).compile({"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)})
     return compiled, getattr(_HITS, "n", 0) == before
 
 
@@ -239,7 +241,7 @@ def cached_call(fn, static: tuple, args: tuple):
             _STATS["loaded"] += 1
         else:
             try:
-                prog, storable = _compile(fn, static, args)
+                prog, storable = _compile(fn, static, args, key)
             except Exception:  # e.g. inside a user's trace: the jit path serves this key
                 prog, storable = None, False
             fresh = prog if storable else None

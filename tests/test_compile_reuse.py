@@ -119,3 +119,20 @@ def test_a_new_process_runs_the_stored_program_bit_for_bit(tmp_path, monkeypatch
         for name, mine in (("q", sol.q), ("status", sol.status), ("d1", d1), ("d2", d2)):
             np.testing.assert_array_equal(r[name], np.asarray(mine), err_msg=name)
     assert np.all(np.asarray(first[0].ok))
+
+
+def test_an_edited_library_compiles_and_stores_its_program_anew(monkeypatch):
+    """A new key for a program JAX's cache holds under an old key (an edited jaxmech whose
+    stroke program did not change) is compiled and stored anew: an executable that JAX
+    loaded from its own cache cannot be stored again (its kernels went missing when run)."""
+    import uuid
+
+    from jaxmech import stored
+
+    us, g = np.linspace(0.0, 2 * np.pi, 361), np.array([0.4, 1.7])
+    old = jm.stroke_kinematics(fourbar(), us, P, g)  # under the suite's key: stored or loaded
+    monkeypatch.setattr(stored, "source_hash", lambda: f"an edited library {uuid.uuid4().hex}")
+    before = stored.store_stats()["stored"]
+    new = jm.stroke_kinematics(fourbar(), us, P, g)
+    assert stored.store_stats()["stored"] == before + 1
+    np.testing.assert_array_equal(np.asarray(new[0].q), np.asarray(old[0].q))
