@@ -6,7 +6,9 @@ but not the tracing and lowering that come before it (its key is the lowered mod
 scene's program those take a second or more of Python.  So the first process that runs a
 jitted library program with concrete arguments compiles it once (``lower().compile()``, the
 same executable the jitted call would build), runs it, and stores that executable
-(``jax.experimental.serialize_executable``); a later process loads it and calls it directly.
+(``jax.experimental.serialize_executable``) on a thread of its own, so the answer does not
+wait for the write (``wait_for_stores``; done at exit); a later process loads it and calls
+it directly.
 
 A stored executable is used only where it is exactly what the jitted function would run:
 
@@ -39,6 +41,7 @@ at every call).  Within a process, a program serves every later call with the sa
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import functools
 import hashlib
@@ -56,7 +59,7 @@ from jax.experimental.serialize_executable import deserialize_and_load, serializ
 
 from .cache import compile_cache_dir, switched_off
 
-__all__ = ["cached_call", "cached_json", "store_dir", "store_stats", "source_hash", "static_token"]
+__all__ = ["cached_call", "cached_json", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
 
 # What ``cached_call`` did, per process: loaded (a stored executable was used), stored (one
 # was written), fallback (the normal path ran where a key existed but compiling failed).
@@ -70,7 +73,8 @@ _FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_pro
 
 
 def store_stats() -> dict[str, int]:
-    """Counts for this process: ``loaded`` (stored executables used), ``stored`` (written), ``fallback``."""
+    """Counts for this process: ``loaded`` (stored executables used), ``stored`` (written:
+    after ``wait_for_stores``, every one this process compiled), ``fallback``."""
     return dict(_STATS)
 
 
@@ -190,9 +194,36 @@ def _store(path: Path, compiled) -> None:
     try:
         payload = pickle.dumps(serialize(compiled))
         _write(path, hashlib.sha256(payload).digest() + payload)
-        _STATS["stored"] += 1
+        with _LOCK:
+            _STATS["stored"] += 1
     except Exception:  # not serialisable, or a read-only cache: used in this process only
         pass
+
+
+# Stores under way: an executable is serialised and written on a thread of its own (0.1 s for
+# a scene's program, which releases the GIL), so the first answer does not wait for it.
+_PENDING: list[threading.Thread] = []
+_LOCK = threading.Lock()
+
+
+def _store_later(path: Path, compiled) -> None:
+    thread = threading.Thread(target=_store, args=(path, compiled), name="jaxmech-store", daemon=True)
+    with _LOCK:
+        _PENDING.append(thread)
+    thread.start()
+
+
+@atexit.register
+def wait_for_stores() -> None:
+    """Wait until every executable this process is storing is written (done at exit, so a
+    script's programs are there for the next process; call it before starting a process
+    that should find them)."""
+    while True:
+        with _LOCK:
+            if not _PENDING:
+                return
+            thread = _PENDING.pop()
+        thread.join()
 
 
 # An executable that JAX loaded from its own persistent cache must not be stored again:
@@ -218,7 +249,14 @@ jax.monitoring.register_event_listener(_count_hit)
 def _compile(fn, static: tuple, args: tuple, key: str):
     """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
     before = getattr(_HITS, "n", 0)
-    compiled = fn.lower(*static, *args).compile({"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)})
+    lowered = fn.lower(*static, *args)
+    # JAX's cache need not keep a copy of what is stored here (0.1 s of a scene's first call)
+    floor = jax.config.jax_persistent_cache_min_compile_time_secs
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
+    try:
+        compiled = lowered.compile({"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)})
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", floor)
     return compiled, getattr(_HITS, "n", 0) == before
 
 
@@ -253,8 +291,8 @@ def cached_call(fn, static: tuple, args: tuple):
         except Exception:  # e.g. an executable the runtime rejects: never again this process
             _PROGRAMS[slot] = None
         else:
-            if fresh is not None:  # stored while the answer runs (dispatch is asynchronous)
-                _store(path, fresh)
+            if fresh is not None:  # stored while the answer runs, on a thread of its own
+                _store_later(path, fresh)
             return out
     _STATS["fallback"] += 1
     return fn(*static, *args)

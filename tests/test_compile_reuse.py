@@ -100,11 +100,12 @@ print(json.dumps(store_stats()))
 def test_a_new_process_runs_the_stored_program_bit_for_bit(tmp_path, monkeypatch):
     """A second process loads the stored stroke executable (no tracing) and gives the same
     bits as the first process and as the plain jitted program."""
-    from jaxmech.stored import store_dir
+    from jaxmech.stored import store_dir, wait_for_stores
 
     us, g = np.linspace(0.0, 2 * np.pi, 361), np.array([0.4, 1.7])
     assert store_dir() is not None  # the suite runs with the compilation cache on
     first = jm.stroke_kinematics(fourbar(), us, P, g)  # stored (or loaded) by this process
+    wait_for_stores()  # written on a thread of their own
     monkeypatch.setenv("JAXMECH_EXPORT_CACHE", "0")
     plain = jm.stroke_kinematics(fourbar(), us, P, g)  # traced and jitted as without the cache
     monkeypatch.delenv("JAXMECH_EXPORT_CACHE")
@@ -134,5 +135,6 @@ def test_an_edited_library_compiles_and_stores_its_program_anew(monkeypatch):
     monkeypatch.setattr(stored, "source_hash", lambda: f"an edited library {uuid.uuid4().hex}")
     before = stored.store_stats()["stored"]
     new = jm.stroke_kinematics(fourbar(), us, P, g)
+    stored.wait_for_stores()
     assert stored.store_stats()["stored"] == before + 1
     np.testing.assert_array_equal(np.asarray(new[0].q), np.asarray(old[0].q))
