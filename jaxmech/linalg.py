@@ -12,8 +12,9 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-__all__ = ["where", "UNROLL_MAX", "small_tmatmul", "solve_blocks", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1"]
+__all__ = ["where", "parts", "entries", "UNROLL_MAX", "small_tmatmul", "solve_blocks", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1"]
 
 def where(c, x, y):
     """``where(c, x, y)`` written with ``lax.select_n``.
@@ -35,6 +36,21 @@ def where(c, x, y):
     return jax.lax.select_n(full(c, jnp.bool_), full(y, dtype), full(x, dtype))
 
 
+def parts(x, axis: int = 0) -> list:
+    """The entries of ``x`` along ``axis``, as a list of arrays without that axis: one
+    ``split`` and a ``squeeze`` each (the same slices as ``x[i]``; tracing ``x[i]`` costs
+    ~150 us of Python each, and the solver code takes ~1,200 entries per scene program)."""
+    axis = axis % x.ndim
+    n = x.shape[axis]
+    pieces = [x] if n == 1 else jax.lax.split(x, (1,) * n, axis=axis)
+    return [jax.lax.squeeze(y, (axis,)) for y in pieces]
+
+
+def entries(a) -> list:
+    """``a (n, k, ...)`` as nested lists ``e[i][j]`` of its ``(...)`` entries."""
+    return [parts(row, 0) for row in parts(a, 0)]
+
+
 # Per-sample systems are tiny (m = 1..8) and run under vmap over up to 1e6 samples.  XLA's
 # CPU batched LAPACK path is ~12x slower per sample than straight-line code, and reductions
 # over a size-m axis end an XLA fusion (everything feeding them is recomputed in the next
@@ -50,14 +66,14 @@ def small_max(x):
         return jnp.zeros(x.shape[:-1], x.dtype)
     if x.shape[-1] > UNROLL_MAX:
         return jnp.max(x, axis=-1)
-    return functools.reduce(jnp.maximum, [x[..., i] for i in range(x.shape[-1])])
+    return functools.reduce(jnp.maximum, parts(x, -1))
 
 
 def small_sum(x):
     """Sum over the last axis, unrolled for small sizes."""
     if x.shape[-1] == 0 or x.shape[-1] > UNROLL_MAX:
         return jnp.sum(x, axis=-1)
-    return functools.reduce(jnp.add, [x[..., i] for i in range(x.shape[-1])])
+    return functools.reduce(jnp.add, parts(x, -1))
 
 
 def small_tmatmul(a, b):
@@ -68,7 +84,8 @@ def small_tmatmul(a, b):
     and they fuse with their neighbours."""
     if a.shape[0] == 0 or a.shape[0] > UNROLL_MAX:
         return a.T @ b
-    terms = [a[i][:, None] * b[i][None] if b.ndim == 2 else a[i] * b[i] for i in range(a.shape[0])]
+    ra, rb = parts(a, 0), parts(b, 0)
+    terms = [ai[:, None] * bi[None] if b.ndim == 2 else ai * bi for ai, bi in zip(ra, rb)]
     return functools.reduce(jnp.add, terms)
 
 
@@ -86,8 +103,8 @@ def _gauss_unrolled(a, b):
     """
     n = a.shape[-1]
     vec = b.ndim == 1
-    ra = [a[i] for i in range(n)]
-    rb = [b[i].reshape(-1) for i in range(n)]
+    ra = parts(a, 0)
+    rb = [r.reshape(-1) for r in parts(b, 0)]
     for k in range(n):
         # pivot: bring the largest |a[i, k]|, i >= k, to row k
         for i in range(k + 1, n):
@@ -148,11 +165,13 @@ def solve_small(a, b):
     if n == 0:  # no unknowns (a mechanism without dependent coordinates)
         return b
     if n == 1:
-        return b / a[0, 0]
+        return b / jnp.reshape(a, ())
     if n == 2:
-        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        x0 = (a[1, 1] * b[0] - a[0, 1] * b[1]) / det
-        x1 = (a[0, 0] * b[1] - a[1, 0] * b[0]) / det
+        (a00, a01), (a10, a11) = entries(a)
+        b0, b1 = parts(b, 0)
+        det = a00 * a11 - a01 * a10
+        x0 = (a11 * b0 - a01 * b1) / det
+        x1 = (a00 * b1 - a10 * b0) / det
         return jnp.stack([x0, x1])
     if n <= UNROLL_MAX:
         return _gauss_unrolled(a, b)
@@ -167,23 +186,24 @@ def solve_blocks(a, b, blocks):
     if len(blocks) == 1:
         return solve_small(a, b)
     vec = b.ndim == 1
-    bb = b[:, None] if vec else b
+    bb = parts(b[:, None] if vec else b, 0)
+    e = entries(a)
     x: dict[int, jax.Array] = {}
     for rows, cols in blocks:
         rhs = [bb[i] for i in rows]
         for j, xj in x.items():
-            rhs = [r - a[i, j] * xj for r, i in zip(rhs, rows)]
-        sub = jnp.stack([jnp.stack([a[i, j] for j in cols]) for i in rows])
+            rhs = [r - e[i][j] * xj for r, i in zip(rhs, rows)]
+        sub = jnp.stack([jnp.stack([e[i][j] for j in cols]) for i in rows])
         xb = solve_small(sub, jnp.stack(rhs))
-        for t, j in enumerate(cols):
-            x[j] = xb[t]
+        for j, xj in zip(cols, parts(xb, 0)):
+            x[j] = xj
     out = jnp.stack([x[j] for j in range(a.shape[-1])])
     return out[:, 0] if vec else out
 
 
 def inv_small(a, blocks=None):
     """Inverse of a small matrix (by ``solve_blocks`` when its ``blocks`` are given)."""
-    eye = jnp.eye(a.shape[-1], dtype=a.dtype)
+    eye = np.eye(a.shape[-1], dtype=a.dtype)
     return solve_small(a, eye) if blocks is None else solve_blocks(a, eye, blocks)
 
 

@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .linalg import parts
 from .xla import unfused
 
 __all__ = ["Mechanism", "cis", "Vars"]
@@ -58,8 +59,8 @@ def _cos_sin(angle):
     160 ns per position (benchmarks/kinematics.py).
     """
     angle = jnp.asarray(angle)
-    pair = unfused(jnp.stack([jnp.cos(angle), jnp.sin(angle)]))
-    return pair[0], pair[1]
+    c, s = parts(unfused(jnp.stack([jnp.cos(angle), jnp.sin(angle)])), 0)
+    return c, s
 
 
 @_cos_sin.defjvp
@@ -284,10 +285,10 @@ class Mechanism:
 
     # ------------------------------------------------------------------ evaluation
     def vars_q(self, q) -> Vars:
-        return Vars({n: q[..., i] for i, n in enumerate(self.coords)})
+        return Vars(dict(zip(self.coords, parts(q, -1)))) if self.coords else Vars({})
 
     def vars_u(self, u) -> Vars:
-        return Vars({n: u[..., i] for i, n in enumerate(self.inputs)})
+        return Vars(dict(zip(self.inputs, parts(u, -1)))) if self.inputs else Vars({})
 
     def vars_p(self, p: Mapping) -> Vars:
         return p if isinstance(p, Vars) else Vars(p)

@@ -8,7 +8,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .linalg import cond1, small_max, small_norm, small_tmatmul, solve_small, where
+from .linalg import cond1, entries, parts, small_max, small_norm, small_tmatmul, solve_small, where
 from .mechanism import Mechanism
 from .options import SolverOptions, tolerances
 from .status import Status
@@ -151,11 +151,12 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
             # right-hand side less the earlier blocks' share; with mu = 0 this is the Newton
             # step exactly, with mu > 0 each block is damped as Levenberg-Marquardt.
             x: dict = {}
+            e, rs = entries(js), parts(r, 0)
             for rows, cols in order:
-                rhs = jnp.stack([r[i] - sum((js[i, j] * xj for j, xj in x.items()), jnp.zeros((), dtype)) for i in rows])
-                sub = jnp.stack([jnp.stack([js[i, j] for j in cols]) for i in rows])
+                rhs = jnp.stack([rs[i] - sum((e[i][j] * xj for j, xj in x.items()), jnp.zeros((), dtype)) for i in rows])
+                sub = jnp.stack([jnp.stack([e[i][j] for j in cols]) for i in rows])
                 xb = damped(sub, rhs, mu)
-                x.update({j: xb[t] for t, j in enumerate(cols)})
+                x.update(zip(cols, parts(xb, 0)))
             dz = jnp.stack([x[j] for j in range(m)])
         dz = where(jnp.all(jnp.isfinite(dz)), dz, jnp.zeros_like(dz))
         size = small_max(jnp.abs(dz))

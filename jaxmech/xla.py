@@ -83,5 +83,7 @@ def unfused(v):
     """
     if not _on_cpu():
         return v
+    # built by iota and compare: a product with a constant identity (np.eye) is folded away
+    # by XLA, and the values are fused again (tests/test_xla.py counts the sines)
     eye = jnp.eye(v.shape[0], dtype=v.dtype)
     return jnp.tensordot(eye, v, axes=1, precision=jax.lax.Precision.HIGHEST)
