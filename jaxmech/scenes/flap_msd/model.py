@@ -175,11 +175,31 @@ def loop_determinants(q, p):
 
 
 # --------------------------------------------------------------------------- closed-form guess
-def _dyad(p1, r1, p2, r2, sign):
+def _dyad(p1, r1, p2, r2, sign, xp=jnp):
     """Angle of ``X - p1`` where ``|X - p1| = r1``, ``|X - p2| = r2`` (NaN if they miss)."""
-    dist = jnp.abs(p2 - p1)
+    dist = xp.abs(p2 - p1)
     cos_ = (r1**2 + dist**2 - r2**2) / (2.0 * r1 * dist)
-    return jnp.angle(p2 - p1) + sign * jnp.arccos(cos_)  # arccos gives NaN for |cos_| > 1
+    return xp.angle(p2 - p1) + sign * xp.arccos(cos_)  # arccos gives NaN for |cos_| > 1
+
+
+def _closed_form(p: Mapping, alpha, signs, xp):
+    """``closed_form_positions`` with the array module ``xp`` (``jnp``, or ``np`` on the host)."""
+    alpha = xp.asarray(alpha, float)
+    C = p["l"] - 1j * p["r"]
+    B = C - (p["s"] - 1j * p["t"])
+    A = p["a"] * xp.exp(1j * alpha)
+    beta = _dyad(A, p["b"], C, p["c"], signs[0], xp)  # loop 1: G on circles about A and C
+    G = A + p["b"] * xp.exp(1j * beta)
+    delta = -xp.angle((G - C) / (1j * p["c"]))
+    phi = _dyad(B, p["d"], G, p["p"], signs[1], xp)  # loop 2: D on circles about B and G
+    D = B + p["d"] * xp.exp(1j * phi)
+    psi = xp.angle(G - D)
+    E = G + p["g"] * xp.exp(1j * psi)
+    F = C + p["c1"] * xp.exp(-1j * delta)
+    xi = _dyad(E, p["h"], F, p["z"], signs[2], xp)  # loop 3: H on circles about E and F
+    H = E + p["h"] * xp.exp(1j * xi)
+    theta = -xp.angle((H - F) / (1j * p["z"]))
+    return xp.stack([beta, delta, phi, psi, xi, theta], axis=-1)
 
 
 @functools.partial(jit, static_argnames="signs")  # one program, not ~15 eager operations
@@ -193,26 +213,13 @@ def closed_form_positions(p: Mapping, alpha, signs=BRANCH_SIGNS):
     **Returns** ``(..., 6)`` array ``(beta, delta, phi, psi, xi, theta)`` in rad (the batch
     shape of the parameters and ``alpha`` in front).
     """
-    alpha = jnp.asarray(alpha, float)
-    C = p["l"] - 1j * p["r"]
-    B = C - (p["s"] - 1j * p["t"])
-    A = p["a"] * jnp.exp(1j * alpha)
-    beta = _dyad(A, p["b"], C, p["c"], signs[0])  # loop 1: G on circles about A and C
-    G = A + p["b"] * jnp.exp(1j * beta)
-    delta = -jnp.angle((G - C) / (1j * p["c"]))
-    phi = _dyad(B, p["d"], G, p["p"], signs[1])  # loop 2: D on circles about B and G
-    D = B + p["d"] * jnp.exp(1j * phi)
-    psi = jnp.angle(G - D)
-    E = G + p["g"] * jnp.exp(1j * psi)
-    F = C + p["c1"] * jnp.exp(-1j * delta)
-    xi = _dyad(E, p["h"], F, p["z"], signs[2])  # loop 3: H on circles about E and F
-    H = E + p["h"] * jnp.exp(1j * xi)
-    theta = -jnp.angle((H - F) / (1j * p["z"]))
-    return jnp.stack([beta, delta, phi, psi, xi, theta], axis=-1)
+    return _closed_form(p, alpha, signs, jnp)
 
 
 def _validate(p):
-    q = np.asarray(closed_form_positions(p, ALPHA_START))
+    # numpy on the host: a check of one design need not compile a program (0.1 s)
+    with np.errstate(invalid="ignore"):
+        q = _closed_form({k: np.asarray(v, float) for k, v in p.items()}, ALPHA_START, BRANCH_SIGNS, np)
     if np.all(np.isfinite(q)):
         return
     C = p["l"] - 1j * p["r"]
