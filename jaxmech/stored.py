@@ -246,17 +246,30 @@ def _count_hit(event: str, **_) -> None:
 jax.monitoring.register_event_listener(_count_hit)
 
 
+# Compiles under way here, and JAX's own threshold while there are any.
+_COMPILING = {"n": 0, "floor": 0.0}
+
+
 def _compile(fn, static: tuple, args: tuple, key: str):
-    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
+    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments.
+
+    JAX's cache need not keep a copy of what is stored here (0.1 s of a scene's first call):
+    its threshold is raised while any such compile runs (counted, so that threads compiling
+    at once restore the user's threshold only when the last one ends)."""
     before = getattr(_HITS, "n", 0)
     lowered = fn.lower(*static, *args)
-    # JAX's cache need not keep a copy of what is stored here (0.1 s of a scene's first call)
-    floor = jax.config.jax_persistent_cache_min_compile_time_secs
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
+    with _LOCK:
+        if _COMPILING["n"] == 0:
+            _COMPILING["floor"] = jax.config.jax_persistent_cache_min_compile_time_secs
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
+        _COMPILING["n"] += 1
     try:
         compiled = lowered.compile({"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)})
     finally:
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", floor)
+        with _LOCK:
+            _COMPILING["n"] -= 1
+            if _COMPILING["n"] == 0:
+                jax.config.update("jax_persistent_cache_min_compile_time_secs", _COMPILING["floor"])
     return compiled, getattr(_HITS, "n", 0) == before
 
 

@@ -134,7 +134,10 @@ def test_an_edited_library_compiles_and_stores_its_program_anew(monkeypatch):
     old = jm.stroke_kinematics(fourbar(), us, P, g)  # under the suite's key: stored or loaded
     monkeypatch.setattr(stored, "source_hash", lambda: f"an edited library {uuid.uuid4().hex}")
     before = stored.store_stats()["stored"]
+    threshold = jax.config.jax_persistent_cache_min_compile_time_secs
     new = jm.stroke_kinematics(fourbar(), us, P, g)
     stored.wait_for_stores()
     assert stored.store_stats()["stored"] == before + 1
+    # JAX's cache kept no copy of it, and its threshold is the user's again
+    assert jax.config.jax_persistent_cache_min_compile_time_secs == threshold
     np.testing.assert_array_equal(np.asarray(new[0].q), np.asarray(old[0].q))
