@@ -59,7 +59,7 @@ from jax.experimental.serialize_executable import deserialize_and_load, serializ
 
 from .cache import compile_cache_dir, switched_off
 
-__all__ = ["cached_call", "cached_json", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
+__all__ = ["cached_call", "cached_chain", "cached_json", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
 
 # What ``cached_call`` did, per process: loaded (a stored executable was used), stored (one
 # was written), fallback (the normal path ran where a key existed but compiling failed).
@@ -151,8 +151,8 @@ def _key(fn, static: tuple, args: tuple) -> str | None:
     for x in leaves:
         if isinstance(x, jax.core.Tracer):
             return None
-        a = jax.typeof(x)
-        avals.append((a.shape, str(a.dtype), a.weak_type))
+        a = x if isinstance(x, jax.ShapeDtypeStruct) else jax.typeof(x)
+        avals.append((tuple(a.shape), str(a.dtype), bool(a.weak_type)))
     flags = tuple(getattr(jax.config, f, None) for f in _FLAGS)
     devices = [(d.platform, d.device_kind, d.id) for d in jax.devices()]
     material = (
@@ -251,13 +251,17 @@ _COMPILING = {"n": 0, "floor": 0.0}
 
 
 def _compile(fn, static: tuple, args: tuple, key: str):
-    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments.
+    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
+    return _compile_lowered(fn.lower(*static, *args), key)
+
+
+def _compile_lowered(lowered, key: str):
+    """``(compiled, whether it may be stored)`` for a lowered program.
 
     JAX's cache need not keep a copy of what is stored here (0.1 s of a scene's first call):
     its threshold is raised while any such compile runs (counted, so that threads compiling
     at once restore the user's threshold only when the last one ends)."""
     before = getattr(_HITS, "n", 0)
-    lowered = fn.lower(*static, *args)
     with _LOCK:
         if _COMPILING["n"] == 0:
             _COMPILING["floor"] = jax.config.jax_persistent_cache_min_compile_time_secs
@@ -309,6 +313,86 @@ def cached_call(fn, static: tuple, args: tuple):
             return out
     _STATS["fallback"] += 1
     return fn(*static, *args)
+
+
+class _Background:
+    """``_compile`` on a thread of its own (XLA releases the GIL while it compiles)."""
+
+    def __init__(self, lowered, key):
+        self._result = None
+        self._error = None
+        self._thread = threading.Thread(target=self._run, args=(lowered, key), name="jaxmech-compile", daemon=True)
+        self._thread.start()
+
+    def _run(self, lowered, key):
+        try:
+            self._result = _compile_lowered(lowered, key)
+        except BaseException as err:  # re-raised where the result is taken
+            self._error = err
+
+    def result(self):
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._result
+
+
+def _shapes(tree):
+    """``tree``'s arrays (or shapes) as plain ``ShapeDtypeStruct``s."""
+    return jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), tree)
+
+
+def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, args2):
+    """``second(*static2, *args2(first(*static1, *args1)))`` for two ``jit`` functions whose
+    static arguments come first: two programs, each run by its stored executable where that
+    is exactly equivalent (as ``cached_call``).  Where they must be compiled, they are
+    compiled at once: XLA compiles the first on a thread of its own while the second is
+    traced and compiled here (a scene's stroke, then its kinematics and outputs: 2 cores
+    do both in about the time of the longer).  ``args2``: a function of the first's outputs
+    (arrays, or their ``ShapeDtypeStruct``s) giving the second's arguments.  With the store
+    off, the programs are kept for this process only."""
+    if jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
+        return second(*static2, *args2(first(*static1, *args1)))
+    key1 = _key(first, static1, args1)
+    if key1 is None:
+        return second(*static2, *args2(first(*static1, *args1)))
+    folder = store_dir()
+    slot1 = (str(folder), key1)
+    pending, fresh = None, []
+    if slot1 not in _PROGRAMS:
+        prog = None if folder is None else _load(folder / f"{key1}.jaxexec")
+        if prog is not None:
+            _STATS["loaded"] += 1
+            _PROGRAMS[slot1] = prog
+        else:
+            lowered = first.lower(*static1, *args1)
+            pending = _Background(lowered, key1)
+    try:
+        info = (_PROGRAMS[slot1] if pending is None else lowered).out_info
+        shapes2 = args2(_shapes(info))
+        key2 = _key(second, static2, shapes2)
+        slot2 = (str(folder), key2)
+        if key2 is not None and slot2 not in _PROGRAMS:
+            prog = None if folder is None else _load(folder / f"{key2}.jaxexec")
+            if prog is not None:
+                _STATS["loaded"] += 1
+            else:
+                prog, storable = _compile(second, static2, shapes2, key2)
+                if storable:
+                    fresh.append((key2, prog))
+            _PROGRAMS[slot2] = prog
+    finally:
+        if pending is not None:  # registered even where the second failed to trace
+            prog, storable = pending.result()
+            _PROGRAMS[slot1] = prog
+            if storable:
+                fresh.append((key1, prog))
+    out1 = _PROGRAMS[slot1](*args1)
+    out2 = second(*static2, *args2(out1)) if key2 is None else _PROGRAMS[slot2](*args2(out1))
+    if folder is not None:
+        for key, prog in fresh:  # stored while the answer runs, on threads of their own
+            _store_later(folder / f"{key}.jaxexec", prog)
+    return out2
 
 
 def cached_json(label: str, static: tuple, compute):

@@ -18,14 +18,14 @@ import jax
 import jax.numpy as jnp
 
 from ..continuation import stroke
-from ..stored import cached_call, cached_json
+from ..stored import cached_chain, cached_json
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
 from ..options import SolverOptions
 from ..status import Status
 from ..xla import jit
 
-__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "scene_outputs", "motion_and_outputs", "output_units", "evaluate"]
+__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "scene_stroke", "scene_kinematics", "scene_outputs", "stroke_stage", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
 
 #: Solver options of a scene's stroke wherever it is evaluated (``run_scene``, sweeps,
 #: design, the live view) unless the caller gives its own: 256 anchors.
@@ -55,9 +55,20 @@ def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     real.  The strokes of all designs are solved by one continuation (``per_design``
     strokes), not one per design under ``vmap``.
     """
-    mech = scene.mechanism
+    return scene_kinematics(scene, points, p, scene_stroke(scene, points, p, options))
+
+
+def _as_dtype(scene, p):
     dtype = jnp.result_type(*[jnp.asarray(v) for v in p.values()], float)
-    p = {k: jnp.asarray(p[k], dtype) for k in mech.params}
+    return {k: jnp.asarray(p[k], dtype) for k in scene.mechanism.params}, dtype
+
+
+def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+    """The first half of ``scene_motion``: every design's drive, sample times, guess and
+    stroke solution, ``(drive, t, guess, solution, dq/du, d2q/du2)`` with ``(D, ...)`` in
+    front (``scene_kinematics`` takes it)."""
+    mech = scene.mechanism
+    p, dtype = _as_dtype(scene, p)
 
     def setup(p1):
         drive, duration = stroke_drive(scene, p1, dtype)
@@ -68,6 +79,14 @@ def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     drive, t, us, guess = jax.vmap(setup)(p)
     # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
     sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, per_design=True)
+    return drive, t, guess, sol, e1, e2
+
+
+def scene_kinematics(scene, points: int, p, part):
+    """The second half of ``scene_motion``: ``(motion, ok)`` from ``scene_stroke``'s ``part``."""
+    mech = scene.mechanism
+    p, _ = _as_dtype(scene, p)
+    drive, t, guess, sol, e1, e2 = part
     ok = sol.status == Status.CONVERGED
     # Mask the *inputs* of everything downstream: no NaN, not even in a branch not taken
     # (failed samples have zero derivatives).
@@ -114,18 +133,32 @@ def scene_outputs(scene, p, mo: Motion) -> dict:
 _UNITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3))
-def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p):
-    """``(motion, {output name: values (D, N)})`` of ``scene_motion`` and ``scene_outputs``
-    as one jitted function (the outputs' units: ``output_units``); ``{}`` without outputs.
-    ``evaluate`` compiles it on its own, the sweep kernels inside theirs: the same
-    computation, so a design's columns do not depend on the path."""
-    mo, _ = scene_motion(scene, points, p, options)
+@functools.partial(jit, static_argnums=(0, 1, 2))
+def stroke_stage(scene, points: int, options: SolverOptions, p):
+    """``scene_stroke`` as a program of its own: the first of the two a scene's evaluation
+    runs (``motion_and_outputs``)."""
+    return scene_stroke(scene, points, p, options)
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2))
+def outputs_stage(scene, points: int, with_outputs: bool, p, part):
+    """The second program: ``(motion, {output name: values (D, N)})`` from ``stroke_stage``'s
+    ``part`` (``{}`` without outputs)."""
+    mo, _ = scene_kinematics(scene, points, p, part)
     if not with_outputs:
         return mo, {}
     outs = scene_outputs(scene, p, mo)
     _UNITS[scene] = {k: unit for k, (_, unit) in outs.items()}
     return mo, {k: v for k, (v, _) in outs.items()}
+
+
+def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p):
+    """``(motion, {output name: values (D, N)})`` of ``scene_motion`` and ``scene_outputs``
+    (the outputs' units: ``output_units``); ``{}`` without outputs.  Two programs, the
+    stroke (``stroke_stage``) and the rest (``outputs_stage``): ``evaluate`` compiles them
+    at once on two threads, and the sweep kernels are the same two programs, so a design's
+    columns do not depend on the path.  Traceable: inside a trace the two are one program."""
+    return outputs_stage(scene, points, with_outputs, p, stroke_stage(scene, points, options, p))
 
 
 def output_units(scene, points: int, options: SolverOptions, p) -> dict:
@@ -149,13 +182,15 @@ _STORED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     """``(motion, outputs)`` of D designs with concrete parameters ``p`` (``{name: (D,)}``):
-    ``scene_motion`` and ``scene_outputs`` as one compiled program.  Outputs that do not
-    trace (``scene.outputs`` converting values to numpy) are evaluated design by design on
-    the host instead: ``outputs`` is then ``None`` and the caller evaluates them."""
+    ``stroke_stage`` then ``outputs_stage``, compiled at once where they must be
+    (``stored.cached_chain``).  Outputs that do not trace (``scene.outputs`` converting values
+    to numpy) are evaluated design by design on the host instead: ``outputs`` is then
+    ``None`` and the caller evaluates them."""
+    first = (stroke_stage, (scene, int(points), options), (p,))
     try:
-        mo, values = cached_call(motion_and_outputs, (scene, int(points), options, True), (p,))
+        mo, values = cached_chain(*first, outputs_stage, (scene, int(points), True), lambda part: (p, part))
     except jax.errors.JAXTypeError:
-        mo, _ = cached_call(motion_and_outputs, (scene, int(points), options, False), (p,))
+        mo, _ = cached_chain(*first, outputs_stage, (scene, int(points), False), lambda part: (p, part))
         return mo, None
     units = output_units(scene, int(points), options, p) if values else {}
     return mo, {k: (values[k], unit) for k, unit in units.items()}

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import threading
+import types
 
 import jax
 import jax.numpy as jnp
@@ -20,7 +22,7 @@ from ..scenes.base import Scene
 from ..options import SolverOptions
 from ..status import Status
 from .designs import reject
-from ..scenes.evaluation import motion_and_outputs, output_units, scene_motion
+from ..scenes.evaluation import motion_and_outputs, output_units, outputs_stage, scene_motion, stroke_stage
 from ..xla import jit
 from .evaluate import Figures, batch_columns, mask_failed, stroke_figures, table_columns
 
@@ -138,6 +140,50 @@ _COMPILED: dict = {}  # (scene, job, devices, x64, names) -> compiled
 _PER_DESIGN: dict = {}  # (scene, job without chunk, devices, x64) -> bytes per design
 
 
+class _TwoStage:
+    """The trace-mode kernel: ``stroke_stage`` then ``outputs_stage``, the two programs
+    ``run_scene`` runs (so a design's columns are ``run_scene``'s bit for bit), compiled at
+    once (the first on a thread of its own)."""
+
+    def __init__(self, scene: Scene, job: Job, spec: dict, sharding):
+        with_outputs = scene.outputs is not None
+        first = jit(lambda p: stroke_stage(scene, job.points, job.options, p), in_shardings=(sharding,), out_shardings=sharding)
+        lowered = first.lower(spec)
+        done: dict = {}
+
+        def compile_first():
+            try:
+                done["c"] = lowered.compile()
+            except BaseException as err:  # re-raised below, on the caller's thread
+                done["err"] = err
+
+        thread = threading.Thread(target=compile_first, name="jaxmech-compile", daemon=True)
+        thread.start()
+        try:
+            part = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), lowered.out_info)
+            second = jit(lambda p, part: outputs_stage(scene, job.points, with_outputs, p, part),
+                         in_shardings=(sharding, sharding), out_shardings=sharding)  # fmt: skip
+            self.second = second.lower(spec, part).compile()
+        finally:
+            thread.join()
+        if "err" in done:
+            raise done["err"]
+        self.first = done["c"]
+
+    def __call__(self, p):
+        return self.second(p, self.first(p))
+
+    def memory_analysis(self):
+        """Both programs' arguments, outputs and temporaries (the second's arguments are the
+        first's outputs and the parameters, counted once)."""
+        a, b = self.first.memory_analysis(), self.second.memory_analysis()
+        return types.SimpleNamespace(
+            argument_size_in_bytes=a.argument_size_in_bytes,
+            output_size_in_bytes=a.output_size_in_bytes + b.output_size_in_bytes,
+            temp_size_in_bytes=max(a.temp_size_in_bytes, b.temp_size_in_bytes),
+        )
+
+
 def compiled_kernel(scene: Scene, job: Job, param_names):
     """AOT-compiled kernel for a chunk of ``job.chunk`` designs, sharded over local devices."""
     sharding = _mesh_sharding()
@@ -147,8 +193,11 @@ def compiled_kernel(scene: Scene, job: Job, param_names):
         return hit, sharding
     dtype = jnp.result_type(float)
     spec = {k: jax.ShapeDtypeStruct((job.chunk,), dtype, sharding=sharding) for k in param_names}
-    jitted = jit(lambda p: _chunk(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
-    compiled = jitted.lower(spec).compile()
+    if job.outputs == "vmap" and job.figures is None:
+        compiled = _TwoStage(scene, job, spec, sharding)
+    else:
+        jitted = jit(lambda p: _chunk(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
+        compiled = jitted.lower(spec).compile()
     if len(_COMPILED) > 32:
         _COMPILED.clear()
     _COMPILED[key] = compiled
