@@ -74,10 +74,12 @@ _COLUMN_ORDER: dict = {}
 
 
 def _chunk(scene: Scene, job: Job, p):
-    """A chunk of designs (``p`` leaves ``(chunk,)``).  Trace mode: ``motion_and_outputs``
-    itself, the program ``run_scene`` runs (the columns are cut from it on the host, so a
-    design's columns are ``run_scene``'s bit for bit); figures mode: the figures ``(chunk,)``
-    and the status, reduced in the kernel; the motion alone where outputs are per design."""
+    """A chunk of designs (``p`` leaves ``(chunk,)``), as one traced function.  Trace mode:
+    ``motion_and_outputs`` (the compiled kernel is its two programs, ``_TwoStage``, which
+    ``run_scene`` runs: the columns are cut from them on the host, so a design's columns are
+    ``run_scene``'s bit for bit; this fused form serves shape and outputs checks); figures
+    mode: the figures ``(chunk,)`` and the status, reduced in the kernel; the motion alone
+    where outputs are per design."""
     if job.outputs != "vmap":
         return scene_motion(scene, job.points, p, job.options)[0]
     if job.figures is None:
