@@ -141,3 +141,40 @@ def test_an_edited_library_compiles_and_stores_its_program_anew(monkeypatch):
     # JAX's cache kept no copy of it, and its threshold is the user's again
     assert jax.config.jax_persistent_cache_min_compile_time_secs == threshold
     np.testing.assert_array_equal(np.asarray(new[0].q), np.asarray(old[0].q))
+
+
+_NEW_SCENE_PROCESS = """
+import json, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+from jaxmech.scenes import get_scene, run_scene
+from jaxmech.stored import store_stats
+table = run_scene(get_scene("sma_flap"), 101).table()
+np.savez(sys.argv[1], **{str(i): np.asarray(v) for i, v in enumerate(table.values())})
+print(json.dumps(store_stats()))
+"""
+
+
+def test_a_new_process_runs_a_scenes_two_stored_programs_bit_for_bit(tmp_path, monkeypatch):
+    """``run_scene``'s two programs (the stroke, then kinematics and outputs, compiled at once
+    on two threads) are stored; a new process loads both and gives the same table, bit for
+    bit, as this process and as the two programs compiled without the store."""
+    from jaxmech.scenes import get_scene, run_scene
+    from jaxmech.stored import wait_for_stores
+
+    first = run_scene(get_scene("sma_flap"), 101).table()
+    wait_for_stores()
+    monkeypatch.setenv("JAXMECH_EXPORT_CACHE", "0")
+    plain = run_scene(get_scene("sma_flap"), 101).table()  # compiled for this process only
+    monkeypatch.delenv("JAXMECH_EXPORT_CACHE")
+    out = subprocess.run([sys.executable, "-c", _NEW_SCENE_PROCESS, str(tmp_path / "t.npz")],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    stats = json.loads(out.stdout.strip().splitlines()[-1])
+    assert stats["loaded"] >= 2 and stats["stored"] == 0, stats
+    r = np.load(tmp_path / "t.npz")
+    assert len(r.files) == len(first) == len(plain)
+    for i, name in enumerate(first):
+        np.testing.assert_array_equal(r[str(i)], np.asarray(first[name]), err_msg=name)
+        np.testing.assert_array_equal(np.asarray(plain[name]), np.asarray(first[name]), err_msg=name)
