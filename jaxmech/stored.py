@@ -51,6 +51,7 @@ import pickle
 import platform
 import tempfile
 import threading
+import zlib
 from pathlib import Path
 
 import jax
@@ -185,14 +186,16 @@ def _load(path: Path):
     if hashlib.sha256(payload).digest() != digest:  # truncated or damaged: never loaded
         return None
     try:
-        return deserialize_and_load(*pickle.loads(payload))
+        return deserialize_and_load(*pickle.loads(zlib.decompress(payload)))
     except Exception:  # from another version or machine after all: compile it anew
         return None
 
 
 def _store(path: Path, compiled) -> None:
     try:
-        payload = pickle.dumps(serialize(compiled))
+        # zlib at level 1: a sixth of the size (3.3 -> 0.58 MB for flap_msd's stroke program)
+        # for 13 ms here and 8 ms when loaded
+        payload = zlib.compress(pickle.dumps(serialize(compiled)), 1)
         _write(path, hashlib.sha256(payload).digest() + payload)
         with _LOCK:
             _STATS["stored"] += 1
