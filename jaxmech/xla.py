@@ -12,11 +12,10 @@ XLA's CPU fusion emitters (the MLIR code generator for fused loops, on by defaul
 jaxlib 0.10) take twice as long to compile the library's programs as the classic LLVM IR
 emitters, for the same values: the four-bar's stroke program compiles in 0.59 s instead of
 1.18 s and runs in 0.97 instead of 1.28 ms (``benchmarks/latency.py``).  ``jit`` compiles
-the library's programs with ``COMPILER_OPTIONS``, which turn them off (a field of XLA's
-debug options that only the CPU compiler reads) and take LLVM's optimisation level from 3
-to 2 (a GPU compiler reads that one too; not yet run on a GPU: none was lent when this was
-written).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions, statuses,
-derivatives and points) comes out the same either way, to rounding.
+the library's programs with ``COMPILER_OPTIONS``, which turn them off: a field of XLA's
+debug options that only the CPU compiler reads (not yet run on a GPU: none was lent when
+this was written).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
+statuses, derivatives and points) comes out the same either way, to rounding.
 """
 
 from __future__ import annotations
@@ -30,11 +29,10 @@ __all__ = ["COMPILER_OPTIONS", "jit", "unfused"]
 
 #: XLA options for every program the library compiles itself (see the module docstring).
 #: A user's own ``jax.jit`` around library calls compiles with the user's options.
-#: ``xla_backend_optimization_level`` 2 (XLA's default is 3): the LLVM pipeline's last level
-#: costs 10-20% of a scene program's compile and gains nothing at run time here (measured:
-#: flap_msd's ``run_scene`` program 1.57 s against 1.75-2.01 s; stroke kinematics at 1e6
-#: positions 144-146 ns per position against 149-151).
-COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 2}
+#: (LLVM at optimisation level 2, XLA's default being 3, was tried: 10-20% less compile for a
+#: scene's program, but a sweep of 8192 four-bar designs ran 7-10% slower, its batched stroke
+#: above all, and the level changes the last bits of some accelerations.)
+COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
 def jit(fun=None, **kwargs):
