@@ -253,25 +253,29 @@ jax.monitoring.register_event_listener(_count_hit)
 _COMPILING = {"n": 0, "floor": 0.0}
 
 
-def _compile(fn, static: tuple, args: tuple, key: str):
+def _compile(fn, static: tuple, args: tuple, key: str, stored: bool = True):
     """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
-    return _compile_lowered(fn.lower(*static, *args), key)
+    return _compile_lowered(fn.lower(*static, *args), key, stored)
 
 
-def _compile_lowered(lowered, key: str):
+def _compile_lowered(lowered, key: str, stored: bool = True):
     """``(compiled, whether it may be stored)`` for a lowered program.
 
-    JAX's cache need not keep a copy of what is stored here (0.1 s of a scene's first call):
-    its threshold is raised while any such compile runs (counted, so that threads compiling
-    at once restore the user's threshold only when the last one ends)."""
+    JAX's cache need not keep a copy of what is ``stored`` here (0.1 s of a scene's first
+    call): its threshold is raised while any such compile runs (counted, so that threads
+    compiling at once restore the user's threshold only when the last one ends).  With the
+    store off, JAX's cache keeps the program as it would any other."""
     before = getattr(_HITS, "n", 0)
+    options = {"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)}
+    if not stored:
+        return lowered.compile(options), False
     with _LOCK:
         if _COMPILING["n"] == 0:
             _COMPILING["floor"] = jax.config.jax_persistent_cache_min_compile_time_secs
             jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
         _COMPILING["n"] += 1
     try:
-        compiled = lowered.compile({"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)})
+        compiled = lowered.compile(options)
     finally:
         with _LOCK:
             _COMPILING["n"] -= 1
@@ -321,15 +325,15 @@ def cached_call(fn, static: tuple, args: tuple):
 class _Background:
     """``_compile`` on a thread of its own (XLA releases the GIL while it compiles)."""
 
-    def __init__(self, lowered, key):
+    def __init__(self, lowered, key, stored):
         self._result = None
         self._error = None
-        self._thread = threading.Thread(target=self._run, args=(lowered, key), name="jaxmech-compile", daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(lowered, key, stored), name="jaxmech-compile", daemon=True)
         self._thread.start()
 
-    def _run(self, lowered, key):
+    def _run(self, lowered, key, stored):
         try:
-            self._result = _compile_lowered(lowered, key)
+            self._result = _compile_lowered(lowered, key, stored)
         except BaseException as err:  # re-raised where the result is taken
             self._error = err
 
@@ -369,7 +373,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
             _PROGRAMS[slot1] = prog
         else:
             lowered = first.lower(*static1, *args1)
-            pending = _Background(lowered, key1)
+            pending = _Background(lowered, key1, folder is not None)
     try:
         info = (_PROGRAMS[slot1] if pending is None else lowered).out_info
         shapes2 = args2(_shapes(info))
@@ -380,7 +384,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
             if prog is not None:
                 _STATS["loaded"] += 1
             else:
-                prog, storable = _compile(second, static2, shapes2, key2)
+                prog, storable = _compile(second, static2, shapes2, key2, folder is not None)
                 if storable:
                     fresh.append((key2, prog))
             _PROGRAMS[slot2] = prog
