@@ -51,6 +51,7 @@ import pickle
 import platform
 import tempfile
 import threading
+from concurrent.futures import ThreadPoolExecutor
 import zlib
 from pathlib import Path
 
@@ -191,6 +192,18 @@ def _load(path: Path):
         return None
 
 
+def _path(folder: Path, key: str) -> Path:
+    return folder / f"{key}.jaxexec"
+
+
+def _stored_program(folder: Path | None, key: str):
+    """The stored executable of ``key`` in ``folder`` (counted as loaded), or None."""
+    prog = None if folder is None else _load(_path(folder, key))
+    if prog is not None:
+        _STATS["loaded"] += 1
+    return prog
+
+
 def _store(path: Path, compiled) -> None:
     try:
         # zlib at level 1: a sixth of the size (a 3.3 MB scene program took 0.58 MB) for
@@ -295,13 +308,10 @@ def cached_call(fn, static: tuple, args: tuple):
     if key is None:
         return fn(*static, *args)
     slot = (str(folder), key)  # a process may switch cache folders: each gets its own file
-    path = folder / f"{key}.jaxexec"
     fresh = None
     if slot not in _PROGRAMS:
-        prog = _load(path)
-        if prog is not None:
-            _STATS["loaded"] += 1
-        else:
+        prog = _stored_program(folder, key)
+        if prog is None:
             try:
                 prog, storable = _compile(fn, static, args, key)
             except Exception:  # e.g. inside a user's trace: the jit path serves this key
@@ -316,32 +326,10 @@ def cached_call(fn, static: tuple, args: tuple):
             _PROGRAMS[slot] = None
         else:
             if fresh is not None:  # stored while the answer runs, on a thread of its own
-                _store_later(path, fresh)
+                _store_later(_path(folder, key), fresh)
             return out
     _STATS["fallback"] += 1
     return fn(*static, *args)
-
-
-class _Background:
-    """``_compile`` on a thread of its own (XLA releases the GIL while it compiles)."""
-
-    def __init__(self, lowered, key, stored):
-        self._result = None
-        self._error = None
-        self._thread = threading.Thread(target=self._run, args=(lowered, key, stored), name="jaxmech-compile", daemon=True)
-        self._thread.start()
-
-    def _run(self, lowered, key, stored):
-        try:
-            self._result = _compile_lowered(lowered, key, stored)
-        except BaseException as err:  # re-raised where the result is taken
-            self._error = err
-
-    def result(self):
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        return self._result
 
 
 def _shapes(tree):
@@ -365,40 +353,39 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
         return second(*static2, *args2(first(*static1, *args1)))
     folder = store_dir()
     slot1 = (str(folder), key1)
-    pending, fresh = None, []
-    if slot1 not in _PROGRAMS:
-        prog = None if folder is None else _load(folder / f"{key1}.jaxexec")
-        if prog is not None:
-            _STATS["loaded"] += 1
-            _PROGRAMS[slot1] = prog
-        else:
-            lowered = first.lower(*static1, *args1)
-            pending = _Background(lowered, key1, folder is not None)
-    try:
-        info = (_PROGRAMS[slot1] if pending is None else lowered).out_info
-        shapes2 = args2(_shapes(info))
-        key2 = _key(second, static2, shapes2)
-        slot2 = (str(folder), key2)
-        if key2 is not None and slot2 not in _PROGRAMS:
-            prog = None if folder is None else _load(folder / f"{key2}.jaxexec")
+    fresh = []
+    with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
+        pending = None
+        if slot1 not in _PROGRAMS:
+            prog = _stored_program(folder, key1)
             if prog is not None:
-                _STATS["loaded"] += 1
-            else:
-                prog, storable = _compile(second, static2, shapes2, key2, folder is not None)
+                _PROGRAMS[slot1] = prog
+            else:  # XLA releases the GIL while it compiles: the second is traced meanwhile
+                lowered = first.lower(*static1, *args1)
+                pending = pool.submit(_compile_lowered, lowered, key1, folder is not None)
+        try:
+            info = (_PROGRAMS[slot1] if pending is None else lowered).out_info
+            shapes2 = args2(_shapes(info))
+            key2 = _key(second, static2, shapes2)
+            slot2 = (str(folder), key2)
+            if key2 is not None and slot2 not in _PROGRAMS:
+                prog = _stored_program(folder, key2)
+                if prog is None:
+                    prog, storable = _compile(second, static2, shapes2, key2, folder is not None)
+                    if storable:
+                        fresh.append((key2, prog))
+                _PROGRAMS[slot2] = prog
+        finally:
+            if pending is not None:  # registered even where the second failed to trace
+                prog, storable = pending.result()
+                _PROGRAMS[slot1] = prog
                 if storable:
-                    fresh.append((key2, prog))
-            _PROGRAMS[slot2] = prog
-    finally:
-        if pending is not None:  # registered even where the second failed to trace
-            prog, storable = pending.result()
-            _PROGRAMS[slot1] = prog
-            if storable:
-                fresh.append((key1, prog))
+                    fresh.append((key1, prog))
     out1 = _PROGRAMS[slot1](*args1)
     out2 = second(*static2, *args2(out1)) if key2 is None else _PROGRAMS[slot2](*args2(out1))
     if folder is not None:
         for key, prog in fresh:  # stored while the answer runs, on threads of their own
-            _store_later(folder / f"{key}.jaxexec", prog)
+            _store_later(_path(folder, key), prog)
     return out2
 
 

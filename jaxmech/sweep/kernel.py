@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import threading
 import types
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
@@ -151,26 +151,14 @@ class _TwoStage:
         with_outputs = scene.outputs is not None
         first = jit(lambda p: stroke_stage(scene, job.points, job.options, p), in_shardings=(sharding,), out_shardings=sharding)
         lowered = first.lower(spec)
-        done: dict = {}
-
-        def compile_first():
-            try:
-                done["c"] = lowered.compile()
-            except BaseException as err:  # re-raised below, on the caller's thread
-                done["err"] = err
-
-        thread = threading.Thread(target=compile_first, name="jaxmech-compile", daemon=True)
-        thread.start()
-        try:
+        # XLA releases the GIL while it compiles: the second program is traced meanwhile
+        with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
+            compiling = pool.submit(lowered.compile)
             part = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), lowered.out_info)
             second = jit(lambda p, part: outputs_stage(scene, job.points, with_outputs, p, part),
                          in_shardings=(sharding, sharding), out_shardings=sharding)  # fmt: skip
             self.second = second.lower(spec, part).compile()
-        finally:
-            thread.join()
-        if "err" in done:
-            raise done["err"]
-        self.first = done["c"]
+        self.first = compiling.result()
 
     def __call__(self, p):
         return self.second(p, self.first(p))
