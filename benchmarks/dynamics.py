@@ -126,11 +126,11 @@ def bench_inverse(model, p, guess0, n, repeats):
     compiled = D.inverse_dynamics_batch.lower(model, False, SolverOptions(), *args).compile()
     compile_s = time.perf_counter() - t0
     out = compiled(*args)
-    ok = np.asarray(out[3]) == 0
+    ok = np.asarray(out["status"]) == 0
     med, ts = median_time(lambda: compiled(*args), repeats)
     return dict(mechanism=mech.name, loops=mech.m // 2, batch=n, compile_s=compile_s, run_median_s=med,
                 run_s=ts, positions_per_s=n / med, success_rate=float(np.mean(ok)),
-                finite_torque_rate=float(np.mean(np.isfinite(np.asarray(out[1][:, 0])))))
+                finite_torque_rate=float(np.mean(np.isfinite(np.asarray(out["tau"][:, 0])))))
 
 
 # --------------------------------------------------------------------------- forward dynamics

@@ -12,6 +12,7 @@ from .actuators import HydraulicCylinder as HydraulicCylinder
 from .actuators import LinearSpring as LinearSpring
 from .actuators import ScrewJack as ScrewJack
 from .actuators import SMAWire as SMAWire
+from .dynamics import Actuator as Actuator
 from .dynamics import Axial as Axial
 from .dynamics import Body as Body
 from .dynamics import DynStatus as DynStatus
@@ -21,6 +22,9 @@ from .dynamics import InverseDynamics as InverseDynamics
 from .dynamics import Model as Model
 from .dynamics import Moment as Moment
 from .dynamics import PointForce as PointForce
+from .dynamics import Prismatic as Prismatic
+from .dynamics import Revolute as Revolute
+from .dynamics import Slot as Slot
 from .dynamics import Potential as Potential
 from .dynamics import Trajectory as Trajectory
 from .dynamics import dyn_status_message as dyn_status_message
@@ -32,10 +36,12 @@ from .dynamics import inverse_dynamics_at as inverse_dynamics_at
 from .dynamics import kinetic_energy as kinetic_energy
 from .dynamics import mass_matrix as mass_matrix
 from .dynamics import potential_energy as potential_energy
+from .dynamics import statics as statics
 from .continuation import solve_stroke as solve_stroke
 from .kinematics import ConstantSpeed as ConstantSpeed
 from .kinematics import Motion as Motion
 from .kinematics import Ramp as Ramp
+from .kinematics import Samples as Samples
 from .kinematics import SmoothStart as SmoothStart
 from .kinematics import input_derivatives as input_derivatives
 from .kinematics import motion as motion

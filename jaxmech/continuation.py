@@ -33,7 +33,8 @@ from .mechanism import Mechanism
 from .structure import blocks
 from .implicit import attach_derivatives, implicit_root, root_derivatives
 from .inputs import batch_shape, prepare
-from .newton import coord_scales, evaluator, flipped_mask, on_branch, newton, per_lane
+from .branches import branch_names, branch_value, flipped_mask, has_branch, on_branch
+from .newton import coord_scales, evaluator, newton, per_lane
 from .options import SolverOptions, tolerances
 from .solution import Solution, raise_if_failed
 from .status import Status
@@ -107,7 +108,7 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
     dz = solve_blocks(js, r, order)
     rn = small_norm(r)
     cond = cond1(js, order)
-    br = mech.branch_value(q, u, p)
+    br = branch_value(mech, q, u, p, js)
     ok = (small_max(jnp.abs(dz)) <= _lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
     ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch(b0, br)
     qf = where(ok, q - dz * s, q)
@@ -155,7 +156,7 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inp
     dtype = guess.dtype
     s = coord_scales(mech, p, dtype)
     angle = ~jnp.asarray(mech.coord_is_length())
-    g0 = where(on_branch(target, mech.branch_value(guess, u, p)), guess, ref) if mech.branch is not None else guess
+    g0 = where(on_branch(target, branch_value(mech, guess, u, p)), guess, ref) if has_branch(mech) else guess
     table = ref[None] + jnp.asarray(_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
     last = _STARTS + 2
     score = lambda st: where(st == Status.CONVERGED, 2, where(st == Status.BRANCH, 1, 0))  # noqa: E731
@@ -174,7 +175,7 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inp
         return j + 1, jax.tree_util.tree_map(lambda a, b: where(take, a, b), new, best)
 
     zero = jnp.zeros((), dtype)
-    none = (guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero, mech.branch_value(guess, u, p), jnp.asarray(-1))
+    none = (guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero, branch_value(mech, guess, u, p), jnp.asarray(-1))
     init = per_lane((jnp.zeros((), jnp.int32), none), jnp.all(jnp.isfinite(guess)))
     _, (q, st, steps, rn, cond, br, _) = jax.lax.while_loop(wanted, attempt, init)
     # Whole turns towards the guess, kept only if the equations do not notice them.
@@ -243,8 +244,8 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     blocks = jnp.moveaxis(blocks.reshape(lead + (nblk + 1, k, dof)), -3, 0)  # (nblk + 1, [D,] k, dof)
     u_first = jnp.broadcast_to(us_s[..., 0, :], (d, dof))
 
-    if mech.branch is not None:
-        b0 = jnp.sign(jax.vmap(lambda g_, u_, p_: mech.branch_value(g_, u_, p_))(g0, u_first, ps))
+    if has_branch(mech):
+        b0 = jnp.sign(jax.vmap(lambda g_, u_, p_: branch_value(mech, g_, u_, p_))(g0, u_first, ps))
     else:
         b0 = jnp.zeros((d,), dtype)
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
@@ -343,7 +344,7 @@ def _stroke_program(mech, options, derivs, single, us, p, guess):
     q, status, steps, rn, cond, br, d1, d2 = out
     inputs_ok = p_fin[:, None] & us_fin[..., :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
     status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
-    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(b0, br) if mech.branch is not None else jnp.zeros(status.shape, jnp.int32)
+    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(b0, br) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
     flipped = where(status == Status.BRANCH, flipped, 0)
     ok = status == Status.CONVERGED
     q_star = where(ok[..., None], q, jnp.nan)
@@ -458,7 +459,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
             # jax.device_put, not jnp.asarray: the latter compiles a small staging program per shape
             out = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x).take(np.arange(n), axis=axis)), out)
     q, status, steps, rn, cond, br, flipped, d1, d2 = out
-    sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, flipped=flipped, coords=mech.coords, branches=mech.branches)
+    sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, flipped=flipped, coords=mech.coords, branches=branch_names(mech))
     return sol, d1, d2
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from .mechanism import Mechanism
 from .options import SolverOptions
 
-__all__ = ["as_inputs", "as_coords", "prepare", "batch_shape"]
+__all__ = ["as_inputs", "as_coords", "prepare", "batch_shape", "own_params"]
 
 
 def _stack_named(mech: Mechanism, names, values: Mapping, what: str, kind: str):
@@ -75,7 +75,17 @@ def _check_dtype(options: SolverOptions, named: dict[str, Any]):
                 raise ValueError(f"{name} is {dt} but dtype={want} was asked for; convert it with .astype({want.name!r})")
 
 
+def own_params(mech: Mechanism, p) -> Mapping:
+    """The mechanism's share of a parameter mapping: a model's (or a scene's) whole dict is
+    accepted by the kinematics, which read only the mechanism's names (missing ones still
+    raise, in ``check_params``)."""
+    return {k: v for k, v in p.items() if k in mech.params} if isinstance(p, Mapping) else p
+
+
 def prepare(mech: Mechanism, u, p, guess, options: SolverOptions, u_what="u"):
+    """Checked arrays ``(u (..., dof), p, guess (..., m))`` of one dtype for a position solve:
+    names, shapes, values and dtypes checked eagerly (``ValueError`` naming the argument)."""
+    p = own_params(mech, p)
     mech.check_params(p)
     _check_dtype(options, {u_what: u, "p": p, "guess": guess})
     u = as_inputs(mech, u, u_what)

@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .mechanism import Mechanism
 from .continuation import stroke
@@ -29,10 +30,17 @@ __all__ = [
     "ConstantSpeed",
     "Ramp",
     "SmoothStart",
+    "Samples",
+    "drive_rates",
+    "point_kinematics",
+    "check_samples",
     "Motion",
     "input_derivatives",
     "time_derivatives",
     "motion",
+    "drive_samples",
+    "split_drive",
+    "join_drive",
     "stroke_kinematics",
     "sample_kinematics",
     "chain_rule",
@@ -85,12 +93,65 @@ class SmoothStart:
         return self.u0 + self.w * (tau + jnp.expm1(-self.k * tau) / self.k)
 
 
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Samples:
+    """A drive given by its samples instead of a time law: inputs ``u``, their rates
+    ``u_dot`` and accelerations ``u_ddot``, ``(N,)`` for one input or ``(N, dof)``, in the
+    order the stroke passes them (it may reverse: a rocker drive, a measured input).
+    `t` (s, optional): the samples' times, for time-dependent loads (zeros if not given).
+
+    Every function that takes a drive law (``motion``, ``inverse_dynamics``) takes
+    ``Samples`` too, with no ``t`` argument: positions are solved by continuation along
+    ``u`` and the rates come from the samples themselves, not from a derivative of a law.
+    """
+
+    u: jax.Array
+    u_dot: jax.Array
+    u_ddot: jax.Array
+    t: jax.Array | None = None
+
+    @property
+    def times(self):
+        """The samples' times (s): `t`, or zeros."""
+        return jnp.zeros(jnp.shape(self.u)[:1], jnp.result_type(self.u, float)) if self.t is None else self.t
+
+
+def check_samples(mech: Mechanism, s: Samples) -> Samples:
+    """``Samples`` with its rates broadcast to its inputs' shape ``(N, dof)`` (a scalar rate:
+    the same at every sample); ``ValueError`` naming the field whose shape does not fit."""
+    xp = jnp if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(s)) else np
+    u = xp.asarray(s.u)
+    if mech.dof == 1 and u.ndim == 1:
+        u = u[:, None]
+    if u.ndim != 2 or u.shape[0] < 1 or u.shape[1] != mech.dof:
+        raise ValueError(f"{mech.name}: Samples.u must have shape (N,) or (N, {mech.dof}) with N >= 1, got {xp.shape(s.u)}")
+    out = {"u": u}
+    for name in ("u_dot", "u_ddot", "t"):
+        v = getattr(s, name)
+        if v is None:
+            out[name] = None
+            continue
+        v = xp.asarray(v)
+        want = u.shape if name != "t" else u.shape[:1]
+        if name != "t" and mech.dof == 1 and v.ndim == 1 and v.shape[0] == u.shape[0]:
+            v = v[:, None]
+        try:
+            out[name] = xp.broadcast_to(v, want)
+        except ValueError:
+            raise ValueError(f"{mech.name}: Samples.{name} of shape {xp.shape(getattr(s, name))} does not fit u of shape {u.shape}") from None
+    return Samples(**out)
+
+
+def drive_rates(drive, t, dof: int):
+    """``(u, u_dot, u_ddot)``, each ``(N, dof)``, of a drive at the times ``t (N,)``: a time
+    law's by nested forward mode, ``Samples`` as given (traceable)."""
+    if isinstance(drive, Samples):
+        return tuple(jnp.reshape(jnp.asarray(x), (-1, dof)) for x in (drive.u, drive.u_dot, drive.u_ddot))
+    return jax.vmap(lambda t_: time_derivatives(lambda s: jnp.reshape(drive(s), (dof,)), t_))(t)
+
+
 # --------------------------------------------------------------------------- derivatives
-def _root_fn(mech: Mechanism, sol_q, ok, p):
-    """``u -> q*(u, p)`` around a solved sample (values fixed, derivatives implicit)."""
-    return lambda u: implicit_root(mech, sol_q, ok, u, p)
-
-
 def input_derivatives(mech: Mechanism, q, u, p):
     """``dq/du`` and ``d2q/du2`` at one solved sample.
 
@@ -173,85 +234,121 @@ def sample_kinematics(mech: Mechanism, point_names: Sequence[str], drive: Callab
     """
     u, ud, udd = time_derivatives(lambda t_: jnp.reshape(drive(t_), (mech.dof,)), t)
     qd, qdd = chain_rule(d1, d2, ud, udd)
-    # Points need no further implicit derivatives: along the exact second-order path
-    # (q + qd s + qdd s^2/2, u + ud s + udd s^2/2) their first two s-derivatives at s = 0
-    # are the true velocity and acceleration.
+    return u, ud, udd, qd, qdd, point_kinematics(mech, point_names, p, q, qd, qdd, u, ud, udd)
+
+
+def point_kinematics(mech: Mechanism, point_names: Sequence[str], p, q, qd, qdd, u, ud, udd) -> dict:
+    """``{name: (position, velocity, acceleration)}`` (complex ``x + i y``: m, m/s, m/s^2) of
+    the named points at one sample whose coordinates' and inputs' rates are known.
+
+    Points need no further implicit derivatives: along the exact second-order path
+    ``(q + qd s + qdd s^2/2, u + ud s + udd s^2/2)`` their first two ``s``-derivatives at
+    ``s = 0`` are the true velocity and acceleration."""
     pts = {}
+    zero = jnp.zeros((), jnp.result_type(q))
     for name in point_names:
 
         def along(s_, name=name):
             return mech.point(name, q + qd * s_ + 0.5 * qdd * s_**2, u + ud * s_ + 0.5 * udd * s_**2, p)
 
-        pts[name] = time_derivatives(along, jnp.zeros_like(t))
-    return u, ud, udd, qd, qdd, pts
+        pts[name] = time_derivatives(along, zero)
+    return pts
 
 
-def _one_sample(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
-    """``sample_kinematics`` with NaN wherever the sample failed (NaN positions)."""
+def _one_sample(mech: Mechanism, point_names: Sequence[str], p, u, ud, udd, q, d1, d2):
+    """One sample's kinematics from its drive rates, NaN wherever the sample failed."""
     ok = jnp.all(jnp.isfinite(q))
     qs = jnp.where(ok, q, 0.0)
     d1 = jnp.where(ok, d1, 0.0)
     d2 = jnp.where(ok, d2, 0.0)
-    u, ud, udd, qd, qdd, pts = sample_kinematics(mech, point_names, drive, p, t, qs, d1, d2)
+    qd, qdd = chain_rule(d1, d2, ud, udd)
+    pts = point_kinematics(mech, point_names, p, qs, qd, qdd, u, ud, udd)
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
-    return (u, ud, udd, q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
+    return (q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2))
-def _motion_eval_leaves(mech, point_names, drive_def, drive_leaves, p, t, q, d1, d2):
-    drive = jax.tree_util.tree_unflatten(drive_def, drive_leaves)
-    return jax.vmap(lambda t_, q_, a_, b_: _one_sample(mech, point_names, drive, p, t_, q_, a_, b_))(t, q, d1, d2)
-
-
-def _motion_eval(mech, point_names, drive, p, t, q, d1, d2):
-    # A drive that is a pytree of arrays is traced (one compile for every speed); a plain
-    # function is static (it is hashable), so it recompiles only when the function changes.
+def split_drive(drive):
+    """``(static part, traced leaves)`` of a drive for a compiled call: a drive that is a
+    pytree of arrays (``ConstantSpeed``, ``Samples``) is traced, so one program serves every
+    speed; any other function is static (it is hashable), recompiled only when it changes."""
     leaves, treedef = jax.tree_util.tree_flatten(drive)
-    if all(isinstance(x, (jax.Array, float, int)) or hasattr(x, "dtype") for x in leaves) and leaves:
-        leaves = [jnp.asarray(x, t.dtype) for x in leaves]
-        return cached_call(_motion_eval_leaves, (mech, point_names, treedef), (leaves, p, t, q, d1, d2))
-    return _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2)
+    if leaves and all(isinstance(x, (jax.Array, float, int)) or hasattr(x, "dtype") for x in leaves):
+        return treedef, leaves
+    return drive, None
+
+
+def join_drive(static, leaves):
+    """The drive ``split_drive`` split."""
+    return static if leaves is None else jax.tree_util.tree_unflatten(static, leaves)
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2))
-def _motion_eval_static(mech, point_names, drive, p, t, q, d1, d2):
-    return jax.vmap(lambda t_, q_, a_, b_: _one_sample(mech, point_names, drive, p, t_, q_, a_, b_))(t, q, d1, d2)
+def _motion_eval(mech, point_names, drive_static, drive_leaves, p, t, q, d1, d2):
+    drive = join_drive(drive_static, drive_leaves)
+    u, ud, udd = drive_rates(drive, t, mech.dof)
+    out = jax.vmap(lambda *a: _one_sample(mech, point_names, p, *a))(u, ud, udd, q, d1, d2)
+    return (u, ud, udd) + out
+
+
+def drive_samples(mech: Mechanism, drive, t):
+    """The stroke ``us (N, dof)`` and the times ``t (N,)`` of a drive: a time law at the
+    times `t` (required), ``Samples`` at their own (`t` must then be None)."""
+    if isinstance(drive, Samples):
+        if t is not None:
+            raise ValueError(f"{mech.name}: a Samples drive carries its own times (Samples(t=...)); leave t out")
+        drive = check_samples(mech, drive)
+        return drive, drive.u, jnp.asarray(drive.times)
+    if t is None:
+        raise ValueError(f"{mech.name}: t (the sample times, s) is required for a drive law; or give the drive as Samples(u, u_dot, u_ddot)")
+    t = jnp.asarray(t)
+    if t.ndim != 1:
+        raise ValueError(f"{mech.name}: t must be a 1-D array of times, got shape {t.shape}")
+    return drive, jax.vmap(drive)(t), t
 
 
 def motion(
     mech: Mechanism,
     drive: Callable,
-    t,
-    p: Mapping,
-    guess,
+    t=None,
+    p: Mapping | None = None,
+    guess=None,
     *,
     points: Sequence[str] | None = None,
     options: SolverOptions = SolverOptions(),
 ) -> Motion:
-    """Positions, velocities and accelerations along a drive law ``u(t)`` (one design).
+    """Positions, velocities and accelerations along a drive (one design).
 
     **Arguments**
 
     - `drive`: any differentiable ``u(t)`` (a pytree such as ``SmoothStart`` or a plain
-      function); scalar for one input or ``(dof,)``.
+      function), scalar for one input or ``(dof,)``; or ``Samples(u, u_dot, u_ddot)`` of
+      the inputs and their rates (then no `t`: a measured or reversing input, no time law).
     - `t`: ``(N,)`` times (s), in order: positions are solved by continuation along them.
-    - `p`: parameters; `guess`: coordinates at ``t[0]`` (picks the branch).
+    - `p`: parameters (a model's whole dict is accepted: names the mechanism does not use
+      are ignored); `guess`: coordinates at the first sample (picks the branch).
     - `points`: names of ``mech.points`` to differentiate too (default: all).
 
-    **Returns** a ``Motion``.
+    **Returns** a ``Motion``: coordinates and every named point's position, velocity and
+    acceleration (``motion.points[name]``).
     """
-    t = jnp.asarray(t)
-    if t.ndim != 1:
-        raise ValueError(f"{mech.name}: t must be a 1-D array of times, got shape {t.shape}")
+    if p is None or guess is None:
+        raise ValueError(f"{mech.name}: motion needs the parameters p= and a guess= at the first sample")
     point_names = tuple(mech.points) if points is None else tuple(points)
     for n in point_names:
         if n not in mech.points:
             raise ValueError(f"{mech.name}: unknown point {n!r}; defined points: {list(mech.points)}")
-    us = jax.vmap(drive)(t)
+    drive, us, t = drive_samples(mech, drive, t)
     # one compiled pass gives positions and dq/du, d2q/du2; the drive's chain rule follows
     sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True)
-    pj = {k: jnp.asarray(v, sol.q.dtype) for k, v in p.items()}
-    u, ud, udd, q, qd, qdd, d1, d2, pts = _motion_eval(mech, point_names, drive, pj, t.astype(sol.q.dtype), sol.q, e1, e2)
+    dtype = sol.q.dtype
+    pj = {k: jnp.asarray(p[k], dtype) for k in mech.params}
+    static, leaves = split_drive(drive)
+    if leaves is None:
+        out = _motion_eval(mech, point_names, static, None, pj, t.astype(dtype), sol.q, e1, e2)
+    else:
+        leaves = [jnp.asarray(x, dtype) for x in leaves]
+        out = cached_call(_motion_eval, (mech, point_names, static), (leaves, pj, t.astype(dtype), sol.q, e1, e2))
+    u, ud, udd, q, qd, qdd, d1, d2, pts = out
     return Motion(
         t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,
         points=pts, status=sol.status, coords=mech.coords, inputs=mech.inputs,

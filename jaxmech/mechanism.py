@@ -42,7 +42,7 @@ import numpy as np
 from .linalg import parts
 from .xla import unfused
 
-__all__ = ["Mechanism", "cis", "Vars"]
+__all__ = ["Mechanism", "cis", "Vars", "equation_entries"]
 
 
 @jax.custom_jvp
@@ -120,6 +120,21 @@ def show_value(v) -> str:
     return f"array of shape {arr.shape}"
 
 
+def equation_entries(eqs) -> list:
+    """The real equations of a constraint function's value (a sequence, a mapping
+    ``{loop name: equation}`` or one equation), as scalars: a complex loop gives its real
+    and imaginary parts, a real equation itself."""
+    if isinstance(eqs, Mapping):
+        eqs = list(eqs.values())
+    if not isinstance(eqs, (list, tuple)):
+        eqs = [eqs]
+    out = []
+    for e in eqs:
+        e = jnp.asarray(e)
+        out += [jnp.real(e), jnp.imag(e)] if jnp.iscomplexobj(e) else [e]
+    return [jnp.reshape(x, ()) for x in out]
+
+
 def _names(value, what: str) -> tuple[str, ...]:
     if isinstance(value, str):
         value = (value,)
@@ -146,7 +161,8 @@ class Mechanism:
     - `coords`: names of the dependent coordinates ``q`` (``m`` of them).
     - `inputs`: names of the driven coordinates ``u`` (one per degree of freedom).
     - `params`: names of every parameter the scene uses (kinematic and physical).
-    - `constraints`: ``fn(q, u, p) -> sequence`` of complex loops and real scalars;
+    - `constraints`: ``fn(q, u, p) -> sequence`` of complex loops and real scalars (or a
+      mapping ``{name: equation}``, which names each loop for messages and reactions);
       must give exactly ``m`` real equations.  ``None`` (or ``[]``) when there are no
       dependent coordinates: a mechanism of inputs only (a hinged flap, a rotating disc)
       is solved trivially and its dynamics and statics work like any other's.
@@ -299,17 +315,9 @@ class Mechanism:
         Complex loops contribute (real, imaginary); real equations contribute one entry.
         """
         eqs = [] if self.constraints is None else self.constraints(self.vars_q(q), self.vars_u(u), self.vars_p(p))
-        if not isinstance(eqs, (list, tuple)):
-            eqs = [eqs]
-        parts = []
-        for e in eqs:
-            e = jnp.asarray(e)
-            if jnp.iscomplexobj(e):
-                parts += [jnp.real(e), jnp.imag(e)]
-            else:
-                parts.append(e)
+        parts = equation_entries(eqs)
         if parts:
-            r = jnp.stack([jnp.reshape(x, ()) for x in parts])
+            r = jnp.stack(parts)
         else:  # no equations: an empty residual of the arguments' dtype
             r = jnp.zeros((0,), jnp.result_type(q, u, float))
         if r.shape[0] != self.m:
@@ -357,6 +365,28 @@ class Mechanism:
         if len(out.shape) == 1:
             return tuple(f"loop {i + 1}" for i in range(out.shape[0]))
         return ("branch",)
+
+    @functools.cached_property
+    def equations(self) -> tuple[tuple[str, tuple[int, ...]], ...]:
+        """The constraint entries by name, with the rows of the residual each gives:
+        ``((name, rows), ...)``.  Names are a mapping's keys (``constraints`` returning
+        ``{"loop B": ..., "slot": ...}``), else ``"loop k"`` for the k-th entry when it is a
+        complex loop (two rows) and ``"equation k"`` when it is real (one row)."""
+        if self.constraints is None or self.m == 0:
+            return ()
+        dtype = jnp.zeros(()).dtype
+        args = (jax.ShapeDtypeStruct((self.m,), dtype), jax.ShapeDtypeStruct((self.dof,), dtype),
+                {n: jax.ShapeDtypeStruct((), dtype) for n in self.params})
+        out = jax.eval_shape(lambda q, u, p: self.constraints(self.vars_q(q), self.vars_u(u), self.vars_p(p)), *args)
+        named = isinstance(out, Mapping)
+        items = list(out.items()) if named else list(enumerate(out if isinstance(out, (list, tuple)) else [out]))
+        rows, k = [], 0
+        for key, e in items:
+            n = 2 if jnp.issubdtype(e.dtype, jnp.complexfloating) else 1
+            name = str(key) if named else f"{'loop' if n == 2 else 'equation'} {key + 1}"
+            rows.append((name, tuple(range(k, k + n))))
+            k += n
+        return tuple(rows)
 
     def length_scale(self, p: Mapping):
         """Characteristic length of a design (m): the largest magnitude among length parameters.

@@ -8,13 +8,14 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from .branches import branch_value, flipped_mask, has_branch, on_branch
 from .linalg import cond1, entries, parts, small_max, small_norm, small_tmatmul, solve_small, where
 from .mechanism import Mechanism
 from .options import SolverOptions, tolerances
 from .status import Status
 from .structure import blocks
 
-__all__ = ["newton", "evaluator", "coord_scales", "on_branch", "off_branch", "flipped_mask", "all_finite", "per_lane"]
+__all__ = ["newton", "evaluator", "coord_scales", "all_finite", "per_lane"]
 
 
 def all_finite(tree) -> jax.Array:
@@ -56,24 +57,6 @@ def evaluator(mech: Mechanism, u, p, dtype):
         return r, j * s[None, :]
 
     return evaluate, s
-
-
-# --------------------------------------------------------------------------- branches
-def off_branch(target, value):
-    """Per branch entry: whether ``value``'s sign differs from the requested sign ``target``
-    (``target`` 0 or NaN: that entry is free).  Shapes ``()`` or ``(n_branches,)``."""
-    return (target != 0) & jnp.isfinite(target) & (jnp.sign(value) != target)
-
-
-def on_branch(target, value):
-    """Whether a branch indicator ``value`` has every requested sign ``target``."""
-    return ~jnp.any(off_branch(target, value))
-
-
-def flipped_mask(target, value):
-    """int32 bit mask of the branch entries off their requested sign (``Solution.flipped``)."""
-    off = jnp.atleast_1d(off_branch(target, value))
-    return jnp.sum(where(off, 2 ** jnp.arange(off.shape[-1], dtype=jnp.int32), 0), axis=-1).astype(jnp.int32)
 
 
 # --------------------------------------------------------------------------- the kernel
@@ -163,14 +146,15 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
         # Cap the step: far from a root a Newton step can leap onto another branch.
         return dz * jnp.minimum(1.0, cap / jnp.maximum(size, tiny)), size
 
-    if mech.branch is not None:
-        b_guess = jnp.sign(mech.branch_value(guess, u, p)) if target is None else target
+    branched = has_branch(mech)
+    if branched:
+        b_guess = jnp.sign(branch_value(mech, guess, u, p)) if target is None else target
 
-        def same_branch(q):
-            return on_branch(b_guess, mech.branch_value(q, u, p))
+        def same_branch(q, jac):
+            return on_branch(b_guess, branch_value(mech, q, u, p, jac))
     else:
 
-        def same_branch(q):
+        def same_branch(q, jac):
             return jnp.asarray(True)
 
     def cond_fn(st: _NewtonState):
@@ -181,7 +165,7 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
         rt, jt = evaluate(qt)
         rtn = small_norm(rt)
         better = jnp.isfinite(rtn) & ((rtn < st.rn) | (rtn <= ftol))
-        on_b = same_branch(qt) | ~st.guard | ~same_branch(st.q)
+        on_b = same_branch(qt, jt) | ~st.guard | ~same_branch(st.q, st.js)
         crossed = st.crossed | (better & ~on_b)
         accept = better & on_b
         q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
@@ -226,8 +210,8 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
             where(converged, Status.CONVERGED, where(st.stalled, Status.INFEASIBLE, Status.MAX_STEPS)),
         ),
     ).astype(jnp.int32)
-    if mech.branch is not None:
-        branch = mech.branch_value(q, u, p)
+    if branched:
+        branch = branch_value(mech, q, u, p)
         status = where((status == Status.CONVERGED) & ~on_branch(b_guess, branch), Status.BRANCH, status).astype(jnp.int32)
         flipped = where(status == Status.BRANCH, flipped_mask(b_guess, branch), 0)
     else:

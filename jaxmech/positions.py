@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .branches import branch_names
 from .linalg import where
 from .implicit import implicit_root
 from .inputs import batch_shape, prepare
@@ -38,7 +39,7 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
     ok = status == Status.CONVERGED
     q_star = where(ok, q_raw, jnp.nan)
     q = implicit_root(mech, q_star, ok, u, p)
-    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, flipped=flipped, coords=mech.coords, branches=mech.branches)
+    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, flipped=flipped, coords=mech.coords, branches=branch_names(mech))
 
 
 @functools.partial(jit, static_argnums=(0, 1))

@@ -20,9 +20,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .mechanism import Mechanism, Vars
+from .mechanism import Mechanism, Vars, equation_entries
 
-__all__ = ["sparsity", "blocks"]
+__all__ = ["sparsity", "blocks", "block_order", "coords_read"]
 
 
 def _dependencies(jaxpr, inputs: list[frozenset]) -> list[frozenset]:
@@ -42,28 +42,28 @@ def _dependencies(jaxpr, inputs: list[frozenset]) -> list[frozenset]:
     return [read(v) for v in jaxpr.outvars]
 
 
-def sparsity(mech: Mechanism) -> np.ndarray:
-    """``(m, m)`` bool: entry ``[i, j]`` is True where equation ``i`` reads coordinate ``j``."""
+def coords_read(mech: Mechanism, fn) -> list[frozenset]:
+    """For each real scalar that ``fn(q, u, p)`` (named views, as constraints take them)
+    returns, the set of coordinate indices it reads (structurally, from its traced program)."""
     dtype = jnp.zeros(()).dtype
     m = mech.m
 
-    def equations(*qs):
+    def scalars(*qs):
         u, p = qs[m], qs[m + 1]
-        eqs = mech.constraints(Vars(dict(zip(mech.coords, qs[:m]))), mech.vars_u(u), mech.vars_p(p))
-        if not isinstance(eqs, (list, tuple)):
-            eqs = [eqs]
-        out = []
-        for e in eqs:
-            e = jnp.asarray(e)
-            out += [jnp.real(e), jnp.imag(e)] if jnp.iscomplexobj(e) else [e]
-        return tuple(jnp.reshape(x, ()) for x in out)
+        return tuple(equation_entries(fn(Vars(dict(zip(mech.coords, qs[:m]))), mech.vars_u(u), mech.vars_p(p))))
 
     args = [jax.ShapeDtypeStruct((), dtype)] * m
     args += [jax.ShapeDtypeStruct((mech.dof,), dtype), {n: jax.ShapeDtypeStruct((), dtype) for n in mech.params}]
-    closed = jax.make_jaxpr(equations)(*args)
+    closed = jax.make_jaxpr(scalars)(*args)
     n_in = len(closed.jaxpr.invars)
     inputs = [frozenset([j]) if j < m else frozenset() for j in range(n_in)]
-    deps = _dependencies(closed.jaxpr, inputs)
+    return _dependencies(closed.jaxpr, inputs)
+
+
+def sparsity(mech: Mechanism) -> np.ndarray:
+    """``(m, m)`` bool: entry ``[i, j]`` is True where equation ``i`` reads coordinate ``j``."""
+    m = mech.m
+    deps = coords_read(mech, mech.constraints)
     if len(deps) != m:  # the residual's own check reports this properly
         return np.ones((m, m), bool)
     pattern = np.zeros((m, m), bool)
@@ -131,6 +131,21 @@ def _components(edges: list[list[int]]) -> list[list[int]]:
     return out
 
 
+def block_order(pattern: np.ndarray) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] | None:
+    """The block lower-triangular order of a square system with structural sparsity
+    ``pattern`` (``[i, j]``: equation ``i`` reads unknown ``j``): ``((rows, cols), ...)`` in
+    solving order, each a square block of equations and the unknowns they determine once
+    the earlier blocks are known; None when the pattern is structurally singular."""
+    n = pattern.shape[0]
+    match = _matching(pattern)
+    if match is None:
+        return None
+    eq_of = {j: i for i, j in enumerate(match)}
+    edges = [[eq_of[j] for j in np.flatnonzero(pattern[i]) if eq_of[j] != i] for i in range(n)]
+    comps = _components(edges)
+    return tuple((tuple(c), tuple(sorted(match[i] for i in c))) for c in comps)
+
+
 @functools.lru_cache(maxsize=256)
 def blocks(mech: Mechanism) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
     """The solving order of ``mech``'s equations: ``((rows, cols), ...)``, each a square
@@ -145,10 +160,5 @@ def blocks(mech: Mechanism) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ..
         pattern = sparsity(mech)
     except Exception:  # noqa: BLE001 - a constraint that does not trace: no structure (its error shows at solve time)
         return whole
-    match = _matching(pattern)
-    if match is None:  # structurally singular: nothing to gain, the solve reports it
-        return whole
-    eq_of = {j: i for i, j in enumerate(match)}
-    edges = [[eq_of[j] for j in np.flatnonzero(pattern[i]) if eq_of[j] != i] for i in range(m)]
-    comps = _components(edges)
-    return tuple((tuple(c), tuple(sorted(match[i] for i in c))) for c in comps)
+    order = block_order(pattern)
+    return whole if order is None else order  # structurally singular: the solve reports it

@@ -3,7 +3,10 @@ forward dynamics.  One module per concept:
 
 - ``model``: the spec (``Body``, the loads, ``Model`` and its parameters);
 - ``virtual_power``: generalized forces and multipliers, mass matrix, energies at one state;
-- ``inverse``: inverse dynamics over batches of states or along a drive law;
+- ``joints``: joints between bodies (revolute, prismatic, slot, actuator) and the layout of
+  the per-body Newton-Euler system; ``reactions``: every joint's reaction from it;
+- ``inverse``: inverse dynamics over batches of states or along a drive, and statics at
+  given poses;
 - ``closure``: closing the loop at a new input by a fixed number of Newton steps;
 - ``statics``: equilibrium of a force-driven model;
 - ``forward``: forward dynamics by an implicit Runge-Kutta method;
@@ -28,6 +31,12 @@ from .inverse import InverseDynamics as InverseDynamics
 from .inverse import inverse_dynamics as inverse_dynamics
 from .inverse import inverse_dynamics_at as inverse_dynamics_at
 from .inverse import inverse_dynamics_batch as inverse_dynamics_batch
+from .inverse import statics as statics
+from .joints import Actuator as Actuator
+from .joints import Prismatic as Prismatic
+from .joints import Revolute as Revolute
+from .joints import Slot as Slot
+from .reactions import joint_reactions as joint_reactions
 from .model import Axial as Axial
 from .model import Body as Body
 from .model import Gravity as Gravity
@@ -62,6 +71,12 @@ __all__ = [
     "inverse_dynamics",
     "inverse_dynamics_at",
     "inverse_dynamics_batch",
+    "statics",
+    "Revolute",
+    "Prismatic",
+    "Slot",
+    "Actuator",
+    "joint_reactions",
     "Equilibrium",
     "equilibrium",
     "close_loop",

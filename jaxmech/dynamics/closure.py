@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from ..linalg import cond1, solve_small
 from ..mechanism import Mechanism
 from ..implicit import implicit_root
-from ..newton import on_branch
+from ..branches import branch_value, has_branch, on_branch
 from ..options import SolverOptions, tolerances
 
 __all__ = ["close_loop"]
@@ -38,8 +38,8 @@ def close_loop(mech: Mechanism, u, p, qg, iters: int, options: SolverOptions = S
     ok = jnp.all(jnp.isfinite(q)) & (jnp.linalg.norm(r) <= ftol * scale)
     s_ = jnp.where(jnp.asarray(mech.coord_is_length()), scale, 1.0)
     ok = ok & (cond1(jax.jacfwd(mech.residual)(q, us, ps) * s_[None, :] / scale) <= cond_max)
-    if mech.branch is not None:
-        ok = ok & on_branch(jnp.sign(mech.branch_value(stop(qg), us, ps)), mech.branch_value(q, us, ps))
+    if has_branch(mech):
+        ok = ok & on_branch(jnp.sign(branch_value(mech, stop(qg), us, ps)), branch_value(mech, q, us, ps))
     q_star = jnp.where(ok, q, jnp.nan)
     return implicit_root(mech, q_star, ok, u, p), ok
 

@@ -12,12 +12,14 @@ it, not on the mechanism; one ``p`` mapping carries them all, merged by name.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Mapping, Sequence
 
 import jax.numpy as jnp
 
 from ..actuators import Spec, parameter_names, resolve
 from ..mechanism import Mechanism, check_parameters
+from .joints import GROUND, JOINT_TYPES, Actuator, Layout, joint_name, layout
 
 __all__ = [
     "Body",
@@ -31,6 +33,8 @@ __all__ = [
     "masses",
     "prepare_params",
     "mechanism_params",
+    "point_of",
+    "angle_of",
 ]
 
 PointSpec = str | Callable  # name of a mechanism point, or fn(q, u, p) -> complex
@@ -73,6 +77,7 @@ class PointForce:
     point: PointSpec
     force: Callable
     name: str = "force"
+    body: str | None = None  #: the body it acts on (needed for joint reactions)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -83,11 +88,15 @@ class Moment:
       coordinate or input, which makes ``M`` a generalized force on that coordinate (the
       power term ``M * coord_dot``, e.g. an aerodynamic hinge moment ``M_AC * delta_dot``).
     - `moment`: ``fn(q, u, p, v, t) -> real``.
+    - `body`: for joint reactions, the body it acts on (its reaction on ground), or a pair
+      ``(a, b)``: ``M`` on b and ``-M`` on a (a torsion spring between two links); `angle`
+      must then be b's angle (less a's).
     """
 
     angle: AngleSpec
     moment: Callable
     name: str = "moment"
+    body: str | tuple[str, str] | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -111,12 +120,14 @@ class Axial:
     - `law`: ``law(length, rate, p, t) -> tension`` (N, positive pulls the ends together);
       every ``jaxmech.actuators`` axial law (``LinearSpring``, ``SMAWire``,
       ``HydraulicCylinder``) is one.  Its virtual power is ``-T dL``.
+    - `bodies`: for joint reactions, the bodies ``(A, B)`` that carry `a` and `b`.
     """
 
     a: PointSpec
     b: PointSpec
     law: Callable
     name: str = "axial"
+    bodies: tuple[str, str] | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -146,6 +157,12 @@ class Model:
     - `actuators`: actuators the model is driven or loaded with (a ``DCMotor``); each
       declares the parameters its specs name (``actuators.parameter_names``), as does
       every actuator used as an ``Axial`` law.
+    - `joints`: optional ``Revolute``, ``Prismatic``, ``Slot`` and ``Actuator`` joints between
+      the bodies (by ``Body.name``, or ``"ground"``): with them, inverse dynamics and statics
+      give every joint's reaction from the per-body Newton-Euler equations
+      (``dynamics.joints``).  Every moving link is then a body (massless ones with mass 0),
+      every body has an angle, every input drives one joint, and every load but gravity
+      says which body it acts on (``body=``; ``Potential`` loads cannot be placed).
 
     A model's parameters (``parameters``) are the mechanism's, then its own, then its
     actuators', merged by name: one ``p`` mapping carries them all, and each function
@@ -161,8 +178,10 @@ class Model:
     loads: Sequence = ()
     params: Sequence[str] = ()
     actuators: Sequence = ()
+    joints: Sequence = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "joints", tuple(self.joints))
         object.__setattr__(self, "bodies", tuple(self.bodies))
         object.__setattr__(self, "loads", tuple(self.loads))
         object.__setattr__(self, "params", (self.params,) if isinstance(self.params, str) else tuple(self.params))
@@ -219,6 +238,53 @@ class Model:
                 check_point(ld.b, f"load {ld.name!r}")
             elif isinstance(ld, Gravity):
                 check_spec(ld.g, f"load {ld.name!r}")
+        if self.joints:
+            self._check_joints(check_point, check_angle)
+
+    def _check_joints(self, check_point, check_angle):
+        mech = self.mechanism
+        names = [b.name for b in self.bodies]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"{mech.name}: bodies {dup} share a name; joints name bodies, so give each body its own name=")
+        if GROUND in names:
+            raise ValueError(f"{mech.name}: {GROUND!r} names the fixed frame; give the body another name")
+        for b in self.bodies:
+            if b.angle is None:
+                raise ValueError(f"{mech.name}: body {b.name!r} needs angle= for joint reactions (a rigid body turns)")
+        for j in self.joints:
+            if not isinstance(j, JOINT_TYPES):
+                raise ValueError(f"joints: expected one of {[c.__name__ for c in JOINT_TYPES]}, got {type(j).__name__}")
+            what = f"joint {joint_name(j)!r}"
+            for pt in (j.points if isinstance(j, Actuator) else (j.point,)):
+                check_point(pt, what)
+            if getattr(j, "angle", None) is not None:
+                check_angle(j.angle, what)
+            if getattr(j, "center", None) is not None:
+                check_point(j.center, what)
+        known = set(names) | {GROUND}
+        for ld in self.loads:
+            where_ = ld.bodies if isinstance(ld, Axial) else getattr(ld, "body", None)
+            if isinstance(ld, Gravity):
+                continue
+            if isinstance(ld, Potential):
+                raise ValueError(f"load {ld.name!r}: a Potential has no point of application, so the joint reactions "
+                                 f"cannot place it; give it as a PointForce, Moment or Axial with body=")
+            if where_ is None:
+                raise ValueError(f"load {ld.name!r}: say which body it acts on ({'bodies=(A, B)' if isinstance(ld, Axial) else 'body='}) "
+                                 f"so that the joint reactions can place it; bodies are {names}")
+            for b in ((where_,) if isinstance(where_, str) else tuple(where_)):
+                if b not in known:
+                    raise ValueError(f"load {ld.name!r}: unknown body {b!r}; bodies are {names} and {GROUND!r}")
+        self.layout  # noqa: B018 - checks that the reactions are determined, eagerly
+
+    @functools.cached_property
+    def layout(self) -> Layout | None:
+        """The static shape of the Newton-Euler system of the joint reactions (None without
+        joints); raises ``ValueError`` when the joints do not determine them."""
+        if not self.joints:
+            return None
+        return layout(tuple(b.name for b in self.bodies), self.joints, self.mechanism.inputs, self.mechanism.name)
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -240,13 +306,13 @@ class Model:
         check_parameters(mech.name, p, names, mech.lengths, mech.signed, whose="this model's")
 
 
-def _point(mech: Mechanism, spec, q, u, p):
+def point_of(mech: Mechanism, spec, q, u, p):
     if isinstance(spec, str):
         return mech.point(spec, q, u, p)
     return jnp.asarray(spec(mech.vars_q(q), mech.vars_u(u), mech.vars_p(p)))
 
 
-def _angle(mech: Mechanism, spec, q, u, p):
+def angle_of(mech: Mechanism, spec, q, u, p):
     if isinstance(spec, str):
         if spec in mech.coords:
             return q[mech.coords.index(spec)]
@@ -258,16 +324,16 @@ def geometry(model: Model, q, u, p):
     """Every pose the loads and inertia need at one state, as a flat tuple of lists of arrays
     ``(r_G, phi, load points, load angles, axial lengths)`` (for nested jvp)."""
     mech = model.mechanism
-    rg = [_point(mech, b.position, q, u, p) for b in model.bodies]
-    ph = [_angle(mech, b.angle, q, u, p) if b.angle is not None else jnp.zeros((), q.dtype) for b in model.bodies]
+    rg = [point_of(mech, b.position, q, u, p) for b in model.bodies]
+    ph = [angle_of(mech, b.angle, q, u, p) if b.angle is not None else jnp.zeros((), q.dtype) for b in model.bodies]
     lp, la, ll = [], [], []
     for ld in model.loads:
         if isinstance(ld, PointForce):
-            lp.append(_point(mech, ld.point, q, u, p))
+            lp.append(point_of(mech, ld.point, q, u, p))
         elif isinstance(ld, Moment):
-            la.append(_angle(mech, ld.angle, q, u, p))
+            la.append(angle_of(mech, ld.angle, q, u, p))
         elif isinstance(ld, Axial):
-            ll.append(jnp.abs(_point(mech, ld.a, q, u, p) - _point(mech, ld.b, q, u, p)))
+            ll.append(jnp.abs(point_of(mech, ld.a, q, u, p) - point_of(mech, ld.b, q, u, p)))
     return rg, ph, lp, la, ll
 
 

@@ -25,6 +25,8 @@ normal force in newtons the same way.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 
@@ -35,7 +37,7 @@ from ..mechanism import Vars
 from ..implicit import implicit_root
 from .model import Axial, Gravity, Model, Moment, PointForce, Potential, geometry, masses
 
-__all__ = ["generalized_forces", "mass_matrix", "kinetic_energy", "potential_energy"]
+__all__ = ["generalized_forces", "LoadedState", "loaded_state", "balance", "mass_matrix", "kinetic_energy", "potential_energy"]
 
 
 def _dot(a, b):
@@ -74,6 +76,116 @@ def _path(model: Model, q, ok, u, ud, udd, p, qd=None, qdd=None):
     return path
 
 
+class LoadedState(NamedTuple):
+    """One solved state with everything the balance equations need (a record, per sample).
+
+    - `ok`: whether the position is finite; `q`, `u`: coordinates and inputs (``q`` zeroed
+      where not ok); `p`: the parameter mapping; `t`: time (s).
+    - `poses`, `rates`, `accels`: ``geometry`` ``(r_G, phi, load points, load angles, axial
+      lengths)`` and its first and second time derivatives (``accels`` None without inertia).
+    - `velocities`: every coordinate's and input's velocity by name (what loads see as ``v``).
+    - `forces`, `moments`, `tensions`: the ``PointForce``, ``Moment`` and ``Axial`` loads' values
+      at this state, in the model's load order per type; `gravity`: each ``Gravity``'s
+      acceleration vector (complex, m/s^2).
+    - `masses`, `inertias`: the bodies' ``m`` (kg) and ``J`` (kg m^2).
+    """
+
+    ok: jax.Array
+    q: jax.Array
+    u: jax.Array
+    p: dict
+    t: jax.Array
+    poses: tuple
+    rates: tuple
+    accels: tuple | None
+    velocities: Vars
+    forces: list
+    moments: list
+    tensions: list
+    gravity: list
+    masses: list
+    inertias: list
+
+
+def loaded_state(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool = True, q_dot=None, q_ddot=None) -> LoadedState:
+    """The ``LoadedState`` at one solved state (arguments as ``generalized_forces``): poses
+    and their rates and accelerations along the exact second-order path, and every load's
+    value there."""
+    mech = model.mechanism
+    p = dict(p)
+    ok, q = _safe(model, q, u, p)
+    dtype = q.dtype
+    path = _path(model, q, ok, u, u_dot, u_ddot, p, q_dot, q_ddot)
+    pv = Vars(p)
+    geo = lambda s: geometry(model, *path(s), p)  # noqa: E731
+    zero = jnp.zeros((), dtype)
+    if inertia:
+        g0, gd, gdd = time_derivatives(geo, zero)
+    else:  # quasi-static: no accelerations, so no second derivatives to trace
+        g0, gd = jax.jvp(geo, (zero,), (jnp.ones((), dtype),))
+        gdd = None
+    _, (qd_, ud_) = jax.jvp(path, (zero,), (jnp.ones((), dtype),))
+    vel = Vars({**dict(zip(mech.coords, qd_)), **dict(zip(mech.inputs, ud_))}) if mech.m + mech.dof else Vars({})
+    qv, uv = mech.vars_q(q), mech.vars_u(u)
+    forces, moments, tensions, grav = [], [], [], []
+    lengths, rates = g0[4], gd[4]
+    k_ax = 0
+    for ld in model.loads:
+        if isinstance(ld, PointForce):
+            forces.append(jnp.asarray(ld.force(qv, uv, pv, vel, t)))
+        elif isinstance(ld, Moment):
+            moments.append(jnp.asarray(ld.moment(qv, uv, pv, vel, t)))
+        elif isinstance(ld, Axial):
+            tensions.append(jnp.asarray(ld.law(lengths[k_ax], rates[k_ax], pv, t)))
+            k_ax += 1
+        elif isinstance(ld, Gravity):
+            grav.append(resolve(ld.g, p) * ld.direction)
+    m_, J_ = masses(model, p)
+    return LoadedState(ok=ok, q=q, u=u, p=p, t=jnp.asarray(t, dtype), poses=g0, rates=gd, accels=gdd, velocities=vel,
+                       forces=forces, moments=moments, tensions=tensions, gravity=grav, masses=m_, inertias=J_)
+
+
+def balance(model: Model, st: LoadedState):
+    """Driving generalized forces and constraint multipliers ``(tau (dof,), lam (m,))`` from
+    a ``LoadedState`` (see ``generalized_forces``)."""
+    mech = model.mechanism
+    q, u, p, t = st.q, st.u, st.p, st.t
+    dtype = q.dtype
+    pv = Vars(p)
+    m_, J_ = st.masses, st.inertias
+    inertia = st.accels is not None
+    a_g, alpha = (st.accels[0], st.accels[1]) if inertia else (None, None)
+    potentials = [ld for ld in model.loads if isinstance(ld, Potential)]
+
+    def work(x):
+        # W(x): grad W = I - Q at the frozen accelerations and loads (virtual power).
+        qx, ux = x[: mech.m], x[mech.m :]
+        rg, ph, lp, la, ll = geometry(model, qx, ux, p)
+        w = jnp.zeros((), dtype)
+        for k in range(len(model.bodies)):
+            if inertia:
+                w = w + m_[k] * _dot(a_g[k], rg[k]) + J_[k] * alpha[k] * ph[k]
+            for gv in st.gravity:
+                w = w - m_[k] * _dot(gv, rg[k])
+        for F, r in zip(st.forces, lp):
+            w = w - _dot(F, r)
+        for M, a in zip(st.moments, la):
+            w = w - M * a
+        for T, L in zip(st.tensions, ll):
+            w = w + T * L
+        for ld in potentials:
+            w = w + ld.energy(mech.vars_q(qx), mech.vars_u(ux), pv, t)
+        return w
+
+    g = jax.grad(work)(jnp.concatenate([q, u]))
+    jq, ju = jax.jacfwd(mech.residual, (0, 1))(q, u, p)
+    jq = jnp.where(st.ok, jq, jnp.eye(mech.m, dtype=dtype))
+    lam = -solve_small(jq.T, g[: mech.m])
+    tau = g[mech.m :] + ju.T @ lam
+    nan = lambda x: jnp.where(st.ok, x, jnp.nan)  # noqa: E731
+    return nan(tau), nan(lam)
+
+
 def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool = True, q_dot=None, q_ddot=None):
     """Driving generalized forces and constraint multipliers at one solved state.
 
@@ -93,67 +205,8 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     the motion; `lam` the multipliers (N for complex loops in metres; see the module
     docstring for the sign).
     """
-    mech = model.mechanism
-    p = dict(p)
-    ok, q = _safe(model, q, u, p)
-    dtype = q.dtype
-    path = _path(model, q, ok, u, u_dot, u_ddot, p, q_dot, q_ddot)
-    pv = Vars(p)
-    geo = lambda s: geometry(model, *path(s), p)  # noqa: E731
-    if inertia:
-        g0, gd, gdd = time_derivatives(geo, jnp.zeros((), dtype))
-    else:  # quasi-static: no accelerations, so no second derivatives to trace
-        g0, gd = jax.jvp(geo, (jnp.zeros((), dtype),), (jnp.ones((), dtype),))
-        gdd = (None, None)
-    _, (qd_, ud_) = jax.jvp(path, (jnp.zeros((), dtype),), (jnp.ones((), dtype),))
-    vel = Vars({**{n: qd_[i] for i, n in enumerate(mech.coords)}, **{n: ud_[i] for i, n in enumerate(mech.inputs)}})
-    qv, uv = mech.vars_q(q), mech.vars_u(u)
-    m_, J_ = masses(model, p)
-    a_g, alpha = gdd[0], gdd[1]
-
-    # Loads frozen at the actual state (constants of the virtual-work function).
-    forces, moments, tensions, grav = [], [], [], []
-    lengths, rates = g0[4], gd[4]
-    k_ax = 0
-    for ld in model.loads:
-        if isinstance(ld, PointForce):
-            forces.append(jnp.asarray(ld.force(qv, uv, pv, vel, t)))
-        elif isinstance(ld, Moment):
-            moments.append(jnp.asarray(ld.moment(qv, uv, pv, vel, t)))
-        elif isinstance(ld, Axial):
-            tensions.append(jnp.asarray(ld.law(lengths[k_ax], rates[k_ax], pv, t)))
-            k_ax += 1
-        elif isinstance(ld, Gravity):
-            grav.append(resolve(ld.g, p) * ld.direction)
-    potentials = [ld for ld in model.loads if isinstance(ld, Potential)]
-
-    def work(x):
-        # W(x): grad W = I - Q at the frozen accelerations and loads (virtual power).
-        qx, ux = x[: mech.m], x[mech.m :]
-        rg, ph, lp, la, ll = geometry(model, qx, ux, p)
-        w = jnp.zeros((), dtype)
-        for k in range(len(model.bodies)):
-            if inertia:
-                w = w + m_[k] * _dot(a_g[k], rg[k]) + J_[k] * alpha[k] * ph[k]
-            for gv in grav:
-                w = w - m_[k] * _dot(gv, rg[k])
-        for F, r in zip(forces, lp):
-            w = w - _dot(F, r)
-        for M, a in zip(moments, la):
-            w = w - M * a
-        for T, L in zip(tensions, ll):
-            w = w + T * L
-        for ld in potentials:
-            w = w + ld.energy(mech.vars_q(qx), mech.vars_u(ux), pv, t)
-        return w
-
-    g = jax.grad(work)(jnp.concatenate([q, u]))
-    jq, ju = jax.jacfwd(mech.residual, (0, 1))(q, u, p)
-    jq = jnp.where(ok, jq, jnp.eye(mech.m, dtype=dtype))
-    lam = -solve_small(jq.T, g[: mech.m])
-    tau = g[mech.m :] + ju.T @ lam
-    nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
-    return nan(tau), nan(lam)
+    st = loaded_state(model, q, u, u_dot, u_ddot, p, t, inertia=inertia, q_dot=q_dot, q_ddot=q_ddot)
+    return balance(model, st)
 
 
 def mass_matrix(model: Model, q, u, p):

@@ -1,0 +1,193 @@
+"""Every joint's reaction from the per-body Newton-Euler equations, at one solved state.
+
+Once the motion is known (``q``, ``q_dot``, ``q_ddot``: every body's centre-of-mass
+acceleration ``a_G`` and angular acceleration ``alpha``), each moving body k gives three
+equations, linear in the joint forces and the drive efforts:
+
+    sum F_joints + sum F_applied + m g = m a_G                    (x and y)
+    sum (r_P - r_G) x F_joints + M_joints + sum (r_P - r_G) x F_applied + M_applied = J alpha
+
+A joint joining bodies (a, b) enters b's equations with its force ``F`` (the force a exerts
+on b) and a's with ``-F`` (``dynamics.joints`` lists the unknowns of each type).  For a
+mobile linkage with as many drives as degrees of freedom the system is square (Gruebler:
+``3 n = 2 j_revolute + 2 j_prismatic + j_slot + dof``), and its sparsity is known before
+any number: ``structure.block_order`` orders it into small blocks (a four-bar: the dyad's 6x6,
+then the crank's 3x3), solved in sequence per sample (``linalg.solve_blocks``).  Unlike the
+multipliers of the loop equations, these reactions do not depend on which joints the loops
+happened to cut; the drive efforts equal the virtual-power ones (a test checks it).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ..linalg import solve_blocks
+from .joints import GROUND, Actuator, Prismatic, Revolute, Slot, joint_name
+from .model import Axial, Model, Moment, PointForce, angle_of, point_of
+from .virtual_power import LoadedState
+
+__all__ = ["joint_reactions"]
+
+
+def _cross(r, f):
+    """z-component of ``r x f`` for planar vectors given as complex numbers."""
+    return jnp.real(r) * jnp.imag(f) - jnp.imag(r) * jnp.real(f)
+
+
+class _System:
+    """The entries of the Newton-Euler system being written: ``a[(row, col)]`` and ``rhs[row]``."""
+
+    def __init__(self, model: Model, st: LoadedState):
+        self.index = {b.name: k for k, b in enumerate(model.bodies)}
+        self.centre = st.poses[0]
+        self.a: dict = {}
+        self.rhs: dict = {}
+
+    def add(self, row, col, value):
+        self.a[(row, col)] = self.a.get((row, col), 0.0) + value
+
+    def force(self, body: str, col: int, direction, at):
+        """Unknown ``x[col]`` times the force ``direction`` (complex) applied to `body` at `at`."""
+        if body == GROUND:
+            return
+        k = self.index[body]
+        self.add(3 * k, col, jnp.real(direction))
+        self.add(3 * k + 1, col, jnp.imag(direction))
+        self.add(3 * k + 2, col, _cross(at - self.centre[k], direction))
+
+    def torque(self, body: str, col: int, sign: float):
+        if body != GROUND:
+            self.add(3 * self.index[body] + 2, col, sign)
+
+    def applied(self, body: str, force=0.0, at=None, moment=0.0):
+        """A known load on `body`: it moves to the right-hand side."""
+        if body == GROUND:
+            return
+        k = self.index[body]
+        rows = (3 * k, 3 * k + 1, 3 * k + 2)
+        mom = moment + (_cross(at - self.centre[k], force) if at is not None else 0.0)
+        for r, v in zip(rows, (jnp.real(force), jnp.imag(force), mom)):
+            self.rhs[r] = self.rhs.get(r, 0.0) - v
+
+
+def _direction(model: Model, joint, q, u, p):
+    """Unit vectors of a joint at this pose: the guide's direction ``e`` (prismatic,
+    straight slot; ``None`` otherwise) and the normal ``n`` its force acts along."""
+    mech = model.mechanism
+    at = point_of(mech, joint.point, q, u, p)
+    if isinstance(joint, Slot) and joint.center is not None:
+        r = at - point_of(mech, joint.center, q, u, p)
+        return None, r / jnp.abs(r)
+    e = jnp.exp(1j * angle_of(mech, joint.angle, q, u, p))
+    return e, 1j * e
+
+
+def _write_joints(sys_: _System, model: Model, st: LoadedState):
+    mech, q, u, p = model.mechanism, st.q, st.u, st.p
+    lay = model.layout
+    geometry = {}
+    for j in model.joints:
+        name = joint_name(j)
+        cols = lay.columns[name]
+        a, b = j.bodies
+        drive = lay.efforts[mech.inputs.index(j.input)] if j.input is not None else None
+        if isinstance(j, Actuator):
+            pa, pb = (point_of(mech, x, q, u, p) for x in j.points)
+            e = (pb - pa) / jnp.abs(pb - pa)
+            sys_.force(b, drive, e, pb)
+            sys_.force(a, drive, -e, pa)
+            geometry[name] = (e, None)
+            continue
+        at = point_of(mech, j.point, q, u, p)
+        if isinstance(j, Revolute):
+            for col, d in zip(cols, (1.0 + 0j, 1j)):
+                sys_.force(b, col, d, at)
+                sys_.force(a, col, -d, at)
+            if drive is not None:
+                sys_.torque(b, drive, 1.0)
+                sys_.torque(a, drive, -1.0)
+            geometry[name] = (None, None)
+            continue
+        e, n = _direction(model, j, q, u, p)
+        sys_.force(b, cols[0], n, at)
+        sys_.force(a, cols[0], -n, at)
+        if isinstance(j, Prismatic):
+            sys_.torque(b, cols[1], 1.0)
+            sys_.torque(a, cols[1], -1.0)
+            if drive is not None:
+                sys_.force(b, drive, e, at)
+                sys_.force(a, drive, -e, at)
+        geometry[name] = (e, n)
+    return geometry
+
+
+def _write_loads(sys_: _System, model: Model, st: LoadedState):
+    mech, q, u, p = model.mechanism, st.q, st.u, st.p
+    inertia = st.accels is not None
+    for k, body in enumerate(model.bodies):
+        m, J = st.masses[k], st.inertias[k]
+        a_g = st.accels[0][k] if inertia else 0.0
+        alpha = st.accels[1][k] if inertia else 0.0
+        for r, v in zip((3 * k, 3 * k + 1, 3 * k + 2), (m * jnp.real(a_g), m * jnp.imag(a_g), J * alpha)):
+            sys_.rhs[r] = sys_.rhs.get(r, 0.0) + v
+        for gv in st.gravity:
+            sys_.applied(body.name, force=m * gv, at=sys_.centre[k])
+    forces, moments, tensions = iter(st.forces), iter(st.moments), iter(st.tensions)
+    for ld, at in zip([ld for ld in model.loads if isinstance(ld, PointForce)], st.poses[2]):
+        sys_.applied(ld.body, force=next(forces), at=at)
+    for ld in model.loads:
+        if isinstance(ld, Moment):
+            M = next(moments)
+            pair = (GROUND, ld.body) if isinstance(ld.body, str) else tuple(ld.body)
+            sys_.applied(pair[1], moment=M)
+            sys_.applied(pair[0], moment=-M)
+        elif isinstance(ld, Axial):
+            T = next(tensions)
+            pa, pb = point_of(mech, ld.a, q, u, p), point_of(mech, ld.b, q, u, p)
+            e = (pb - pa) / jnp.abs(pb - pa)  # tension pulls the ends together
+            sys_.applied(ld.bodies[0], force=T * e, at=pa)
+            sys_.applied(ld.bodies[1], force=-T * e, at=pb)
+
+
+def joint_reactions(model: Model, st: LoadedState):
+    """Every joint's reaction and every drive's effort at one solved state.
+
+    **Arguments**: `model` with ``joints``; `st` the ``virtual_power.LoadedState`` of the
+    sample (inertia left out where it was built quasi-static).
+
+    **Returns** ``(efforts (dof,), forces, moments)``: `efforts` the drive torque (N m) or
+    force (N) on each input, in its positive sense; `forces` ``{joint: F}`` the force (N,
+    complex ``Fx + i Fy``, global) that the joint's first body exerts on its second (a
+    slot's or a guide's normal force as a vector; an actuator's push on its second body);
+    `moments` ``{joint: M}`` (N m, CCW on the second body) for prismatic joints.  NaN where
+    the position failed.
+    """
+    lay = model.layout
+    dtype = st.q.dtype
+    sys_ = _System(model, st)
+    geometry = _write_joints(sys_, model, st)
+    _write_loads(sys_, model, st)
+    n = lay.size
+    zero = jnp.zeros((), dtype)
+    a = jnp.stack([jnp.stack([jnp.asarray(sys_.a.get((i, j), zero), dtype) for j in range(n)]) for i in range(n)])
+    b = jnp.stack([jnp.asarray(sys_.rhs.get(i, zero), dtype) for i in range(n)])
+    ok = st.ok
+    a = jnp.where(ok, a, jnp.eye(n, dtype=dtype))
+    x = solve_blocks(a, b, lay.order)
+    x = jnp.where(ok, x, jnp.nan)
+    efforts = jnp.stack([x[c] for c in lay.efforts]) if lay.efforts else jnp.zeros((0,), dtype)
+    forces, moments = {}, {}
+    mech = model.mechanism
+    for j in model.joints:
+        name = joint_name(j)
+        cols = lay.columns[name]
+        e, nrm = geometry[name]
+        if isinstance(j, Actuator):
+            forces[name] = x[lay.efforts[mech.inputs.index(j.input)]] * e
+        elif isinstance(j, Revolute):
+            forces[name] = jnp.asarray(x[cols[0]] + 1j * x[cols[1]])
+        else:
+            forces[name] = x[cols[0]] * nrm
+            if isinstance(j, Prismatic):
+                moments[name] = x[cols[1]]
+    return efforts, forces, moments
