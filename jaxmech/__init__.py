@@ -47,6 +47,7 @@ from .kinematics import input_derivatives as input_derivatives
 from .kinematics import motion as motion
 from .kinematics import stroke_kinematics as stroke_kinematics
 from .kinematics import time_derivatives as time_derivatives
+from .linkage import Linkage as Linkage
 from .mechanism import Mechanism as Mechanism
 from .mechanism import Vars as Vars
 from .mechanism import cis as cis

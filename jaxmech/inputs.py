@@ -44,11 +44,15 @@ def _with_last_axis(mech: Mechanism, x, names, what: str, kind: str):
 
 def as_inputs(mech: Mechanism, u, what="u"):
     """Inputs as an array ``(..., dof)``.  A dict maps input names to arrays; for one-input
-    mechanisms a bare array is the batch of that input."""
+    mechanisms a bare array is the batch of that input (a last axis of size 1 is taken as
+    the input axis: ``(dof,)`` and ``(N, dof)`` arrays are accepted as documented)."""
     if isinstance(u, Mapping):
         return _stack_named(mech, mech.inputs, u, what, "input")
     if mech.dof == 1:
-        return _xp(u).asarray(u)[..., None]
+        # The documented shapes are (..., dof) or, for one input, the bare batch: a last
+        # axis of size 1 is the input axis already.
+        u = _xp(u).asarray(u)
+        return u if u.ndim >= 1 and u.shape[-1] == 1 else u[..., None]
     return _with_last_axis(mech, u, mech.inputs, what, "input")
 
 

@@ -1,0 +1,8 @@
+"""Linkages from their drawings: joints at coordinates, links through them, sliders, slots
+and actuators; the loop equations written for you (``Linkage.equations()``), every joint's
+reaction from the per-body Newton-Euler equations, and a plain file format
+(``load_linkage``, ``jaxmech run my_linkage.toml``)."""
+
+from .spec import Linkage as Linkage
+
+__all__ = ["Linkage"]
