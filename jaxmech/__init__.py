@@ -48,6 +48,7 @@ from .kinematics import motion as motion
 from .kinematics import stroke_kinematics as stroke_kinematics
 from .kinematics import time_derivatives as time_derivatives
 from .linkage import Linkage as Linkage
+from .linkage import load_linkage as load_linkage
 from .mechanism import Mechanism as Mechanism
 from .mechanism import Vars as Vars
 from .mechanism import cis as cis

@@ -187,7 +187,7 @@ def _parser() -> _Parser:
         description="Run SCENE over its stroke and write DIR/SCENE.csv (one row per input, columns NAME[UNIT]) "
         "and the scene's plots as PNG; print the summary table.",
     )
-    r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
+    r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     r.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable; 'jaxmech scenes SCENE' lists them")
     r.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
     r.add_argument("--out", default="jaxmech-out", metavar="DIR", help="output folder (default ./jaxmech-out)")
@@ -197,7 +197,7 @@ def _parser() -> _Parser:
         help="animate a scene's stroke to GIF or HTML",
         description="Animate SCENE over its stroke, with the paths of its traced points, to a GIF (Pillow) or a self-contained HTML player.",
     )
-    a.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
+    a.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     a.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable")
     a.add_argument("--frames", type=_positive("--frames"), default=60, metavar="N", help="number of frames (default 60)")
     a.add_argument("--fps", type=_positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
@@ -211,7 +211,7 @@ def _parser() -> _Parser:
         "(bounded memory; rerun the same command to resume an interrupted sweep). --figures keeps a few numbers "
         "per design (max, its position, min, its position, travel of every column; status) instead of every sample.",
     )
-    s.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes')")
+    s.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     s.add_argument("--grid", action="append", metavar="NAME=START:STOP:N", default=[], help="a parameter axis: N values from START to STOP (SI units); repeatable")
     s.add_argument("--random", type=_positive("--random"), default=None, metavar="COUNT", help="COUNT random designs, uniform in the --range box")
     s.add_argument("--range", dest="ranges", action="append", metavar="NAME=LOW:HIGH", default=[],
@@ -244,6 +244,15 @@ def _parser() -> _Parser:
 def _scene(name):
     from .scenes import get_scene
 
+    if name.lower().endswith((".toml", ".json")):
+        from .scenes.linkage_scene import scene_from_file
+
+        try:
+            return scene_from_file(name)
+        except OSError as e:
+            raise UsageError(f"cannot read {name}: {e.strerror or e}") from None
+        except ValueError as e:
+            raise UsageError(" ".join(str(e).split())) from None
     try:
         return get_scene(name)
     except ValueError as e:

@@ -3,6 +3,8 @@ and actuators; the loop equations written for you (``Linkage.equations()``), eve
 reaction from the per-body Newton-Euler equations, and a plain file format
 (``load_linkage``, ``jaxmech run my_linkage.toml``)."""
 
+from .files import load_linkage as load_linkage
+from .files import read_linkage_file as read_linkage_file
 from .spec import Linkage as Linkage
 
-__all__ = ["Linkage"]
+__all__ = ["Linkage", "load_linkage", "read_linkage_file"]

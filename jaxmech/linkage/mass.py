@@ -46,7 +46,7 @@ def link_mass_properties(points, mass: float) -> tuple[complex, float]:
     span = np.max(np.abs(z[:, None] - z[None, :]))
     if len(hull) < 3 or abs(area) <= 1e-12 * span * span:
         i, j = np.unravel_index(np.argmax(np.abs(z[:, None] - z[None, :])), (z.size, z.size))
-        return complex(0.5 * (z[i] + z[j])), mass * abs(z[i] - z[j]) ** 2 / 12.0
+        return complex(0.5 * (z[i] + z[j])), float(mass * abs(z[i] - z[j]) ** 2 / 12.0)
     gx = np.sum((x + x1) * c) / (6.0 * area)
     gy = np.sum((y + y1) * c) / (6.0 * area)
     # polar second moment of the polygon about the origin, then about its centroid

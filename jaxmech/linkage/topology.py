@@ -350,7 +350,7 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
 
     def angle_spec(body):
         th = b.theta(body)
-        if len(th) == 1 and th[0][0] == 1:
+        if len(th) == 1 and th[0][0] == 1 and th[0][1] in mech.coords + mech.inputs:
             return th[0][1]
         return lambda q, u, p: angle_value(th, values(q, u, p))
 

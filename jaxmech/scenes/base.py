@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..inputs import own_params
 from ..kinematics import Motion
 from ..mechanism import Mechanism
 from ..status import Status, status_counts
@@ -119,7 +120,7 @@ class Scene:
         for k in overrides:
             self.check_name(k)
         p = {**self.defaults, **{k: float(v) for k, v in overrides.items()}}
-        self.mechanism.check_params(p)
+        self.mechanism.check_params(own_params(self.mechanism, p))
         if self.validate is not None:
             self.validate(p)
         return p

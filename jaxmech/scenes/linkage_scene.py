@@ -1,0 +1,133 @@
+"""A ``Linkage`` as a scene: what ``jaxmech run my_linkage.toml`` runs.
+
+The table holds every coordinate (with its rates), the drive's torque or force and every
+joint's reaction (``F_<joint>_x``, ``F_<joint>_y``; a slider's moment ``M_<joint>``), from
+the per-body Newton-Euler equations at every sample of the stroke.
+"""
+
+from __future__ import annotations
+
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..dynamics.joints import Prismatic, joint_name
+from ..dynamics.reactions import joint_reactions
+from ..dynamics.virtual_power import loaded_state
+from ..linkage.files import read_linkage_file
+from ..linkage.spec import Linkage
+from ..units import to_si
+from .base import Scene
+
+__all__ = ["linkage_scene", "scene_from_file", "PARAMETER_UNITS"]
+
+#: SI unit of a linkage parameter by its prefix.
+PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", "m_": "kg", "J_": "kg m^2",
+                   "Fx_": "N", "Fy_": "N", "M_": "N m", "g": "m/s^2"}
+
+
+def _unit(name: str) -> str:
+    if name == "g":
+        return "m/s^2"
+    for prefix, unit in PARAMETER_UNITS.items():
+        if name.startswith(prefix):
+            return unit
+    return ""
+
+
+def _column(name: str) -> str:
+    return re.sub(r"\W+", "_", name).strip("_")
+
+
+def _coordinate_unit(lk: Linkage, name: str) -> str:
+    return "m" if name in lk.mechanism.lengths else "rad"
+
+
+def _outputs(lk: Linkage):
+    model = lk.model
+    mech = model.mechanism
+
+    def outputs(p, mo):
+        def one(q, u, ud, udd, qd, qdd, t):
+            st = loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd)
+            return joint_reactions(model, st)
+
+        eff, forces, moments = jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t)
+        out = {}
+        for k, name in enumerate(mech.inputs):
+            out[f"effort_{_column(name)}"] = (eff[:, k], "N" if name in mech.lengths else "N m")
+        for j in model.joints:
+            name = joint_name(j)
+            col = _column(name)
+            out[f"F_{col}_x"] = (jnp.real(forces[name]), "N")
+            out[f"F_{col}_y"] = (jnp.imag(forces[name]), "N")
+            if isinstance(j, Prismatic):
+                out[f"M_{col}"] = (moments[name], "N m")
+        return out
+
+    return outputs
+
+
+def _drawing(lk: Linkage):
+    links, polygons = [], []
+    for link, pts in lk.links.items():
+        if len(pts) == 2:
+            links.append(tuple(pts))
+        elif len(pts) > 2:
+            polygons.append(tuple(pts))
+    acts = [tuple(pts) for _, pts in lk.topology.actuators]
+    tracers = [x for x in lk.topology.points if sum(x in pts for pts in lk.links.values()) == 1 and x not in lk.ground
+               and not any(x in pts for pts in acts)]
+    slots = [{"centre": c, "radius": 0.0, "pin": pin} for pin, _, c in lk.topology.slots if c]
+
+    def drawing(p):
+        spec = {"links": links + acts, "polygons": polygons, "ground": list(lk.ground), "trace": tracers}
+        if slots:
+            spec["slots"] = [dict(s, radius=float(p[f"R_{s['pin']}"])) for s in slots]
+        return spec
+
+    return drawing
+
+
+def linkage_scene(lk: Linkage, stroke=None, speed: float = 1.0, summary: str | None = None) -> Scene:
+    """The ``Scene`` of a linkage with one driver: its drawing's parameters as defaults, the
+    stroke ``(start, end)`` of the input (default: a crank's whole turn from the drawing, an
+    actuator's or slider's drawing value to 1.5 times it), at constant `speed`."""
+    mech = lk.mechanism
+    if mech.dof != 1:
+        raise ValueError(f"{lk.name}: a scene has one driven input; this linkage has {mech.dof} ({list(mech.inputs)})")
+    u_draw = float(lk.input_at_drawing[0])
+    name = mech.inputs[0]
+    is_angle = name not in mech.lengths
+    if stroke is None:
+        stroke = (u_draw, u_draw + 2 * np.pi) if is_angle else (u_draw, 1.5 * u_draw if u_draw else 1.0)
+    u0, u1 = (float(x) for x in stroke)
+    guess = lk.guess
+    if abs(u0 - u_draw) > 1e-12 * (1.0 + abs(u_draw)):
+        sol = lk.solve(np.array([u0]))  # the drawing's pose carried to the stroke's start
+        if np.all(np.isfinite(np.asarray(sol.q[0]))):
+            guess = np.asarray(sol.q[0])
+    units = {n: _coordinate_unit(lk, n) for n in mech.coords + mech.inputs}
+    params = {k: (_unit(k), "drawing" if _unit(k) in ("m", "rad") else "mass property or load") for k in lk.params}
+    return Scene(
+        name=lk.name,
+        summary=summary or f"linkage {lk.name}: {len(lk.links)} links, driven by {name} from {u0:.6g} to {u1:.6g}",
+        mechanism=mech, defaults=lk.params, guess=lambda p, g=jnp.asarray(guess): g,
+        stroke=lambda p: (u0, u1), speed=float(speed), units=units, outputs=_outputs(lk), drawing=_drawing(lk),
+        parameters=params)
+
+
+def scene_from_file(path) -> Scene:
+    """The scene of a linkage file (TOML or JSON; its ``[stroke]`` table sets the stroke)."""
+    lk, stroke = read_linkage_file(path)
+    name = lk.mechanism.inputs[0] if lk.mechanism.dof == 1 else ""
+    unit = "m" if name in lk.mechanism.lengths else "rad"
+    rng = None
+    if "from" in stroke or "to" in stroke:
+        if not ("from" in stroke and "to" in stroke):
+            raise ValueError(f"{lk.name}: [stroke] needs both from and to")
+        rng = tuple(to_si(str(stroke[k]), unit) for k in ("from", "to"))
+    speed = to_si(str(stroke.get("speed", 1.0)), unit + "/s")
+    return linkage_scene(lk, rng, speed, stroke.get("summary"))
