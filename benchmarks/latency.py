@@ -135,6 +135,17 @@ fourbar = jm.Mechanism(
 )
 model = jm.Model(fourbar, bodies=[jm.Body("G3", "m3", angle="theta3", inertia="J3")], loads=[jm.Gravity()])
 """,
+    "sixbar_linkage_reactions": """
+watt = jm.Linkage(
+    points={"O2": (0, 0), "A": (0.5, 0.866), "B": (3.15, 2.0), "O4": (3.5, 0), "E": (4.6, 1.6), "F": (6.2, 3.2), "O6": (7.0, 1.0)},
+    links={"crank": "O2 A", "coupler": "A B", "rocker": "O4 B E", "link5": "E F", "link6": "O6 F"},
+    ground="O2 O4 O6", driver="crank", mass={"crank": 1.0, "coupler": 3.0, "rocker": 4.0, "link5": 2.5, "link6": 2.0}, gravity=9.81)
+t0 = time.perf_counter()
+s = np.linspace(0, 2 * np.pi, 361)
+res = watt.inverse_dynamics(jm.Samples(1.05 + 1.2 * np.sin(s), 1.2 * np.cos(s), -1.2 * np.sin(s)))
+jax.block_until_ready(res.joints)
+mark("first_stroke_with_reactions_s", t0)
+""",
     "fourbar_gradient": _FOURBAR + """
 t0 = time.perf_counter()
 def figure(p):

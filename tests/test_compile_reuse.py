@@ -178,3 +178,31 @@ def test_a_new_process_runs_a_scenes_two_stored_programs_bit_for_bit(tmp_path, m
     for i, name in enumerate(first):
         np.testing.assert_array_equal(r[str(i)], np.asarray(first[name]), err_msg=name)
         np.testing.assert_array_equal(np.asarray(plain[name]), np.asarray(first[name]), err_msg=name)
+
+
+def _watt(shift=0.0, scale=1.0):
+    """A Watt six-bar drawn with its joints at the given coordinates (moved by `shift` and
+    scaled by `scale`: another drawing of the same topology)."""
+    pts = {"O2": (0, 0), "A": (0.5, 0.866), "B": (3.15, 2.0), "O4": (3.5, 0), "E": (4.6, 1.6), "F": (6.2, 3.2), "O6": (7.0, 1.0)}
+    pts = {k: ((x + shift) * scale, (y - shift) * scale) for k, (x, y) in pts.items()}
+    return jm.Linkage(pts, {"crank": "O2 A", "coupler": "A B", "rocker": "O4 B E", "link5": "E F", "link6": "O6 F"},
+                      ground="O2 O4 O6", driver="crank", mass={"crank": 1.0, "coupler": 3.0, "rocker": 4.0, "link5": 2.5}, gravity=9.81)
+
+
+def test_a_new_drawing_of_a_compiled_topology_compiles_nothing():
+    s = np.linspace(0.0, 2 * np.pi, 40)
+    drive = jm.Samples(1.2 + 0.8 * np.sin(s), 0.8 * np.cos(s), -0.8 * np.sin(s))
+    first = _watt().inverse_dynamics(drive)
+    other = _watt(shift=0.3, scale=1.1)
+    assert other.mechanism == _watt().mechanism and other.model is _watt().model
+    COUNTER.n, COUNTER.on = 0, True
+    try:
+        second = other.inverse_dynamics(drive)
+    finally:
+        COUNTER.on = False
+    assert COUNTER.n == 0, f"{COUNTER.n} programs compiled for a new drawing of a compiled topology"
+    assert np.all(np.asarray(first.status) == 0) and np.all(np.asarray(second.status) == 0)
+    # the new drawing really is another linkage: a scaled copy turns the same way, with
+    # reactions that scale as forces do (masses unchanged, lengths x1.1)
+    np.testing.assert_allclose(np.asarray(second.q), np.asarray(first.q), rtol=0, atol=1e-9)
+    assert not np.allclose(np.asarray(second.tau), np.asarray(first.tau))

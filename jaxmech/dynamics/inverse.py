@@ -21,6 +21,7 @@ from ..kinematics import chain_rule, drive_rates, drive_samples, join_drive, poi
 from ..options import SolverOptions
 from ..positions import solve_one
 from ..status import Status
+from ..stored import cached_call
 from ..xla import jit
 from .model import Model, mechanism_params, prepare_params
 from .reactions import joint_reactions
@@ -208,5 +209,7 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     static, leaves = split_drive(drive)
     if leaves is not None:
         leaves = [jnp.asarray(x, dtype) for x in leaves]
-    u, ud, udd, out = _along(model, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype), sol.q, d1, d2)
+    # a new process runs the stored executable where exactly equivalent (concrete arguments)
+    u, ud, udd, out = cached_call(_along, (model, bool(quasi_static), tuple(mech.points), static),
+                                  (leaves, pj, t.astype(dtype), sol.q, d1, d2))
     return _result(mech, t, u, ud, udd, dict(out, q=sol.q, status=sol.status))

@@ -163,6 +163,9 @@ class Model:
       (``dynamics.joints``).  Every moving link is then a body (massless ones with mass 0),
       every body has an angle, every input drives one joint, and every load but gravity
       says which body it acts on (``body=``; ``Potential`` loads cannot be placed).
+    - `program_key`: what identifies this model's compiled programs across processes (a
+      ``Linkage`` sets it from its topology, so a new process loads them from the store);
+      None (the default) for a model of your own functions: nothing is stored for it.
 
     A model's parameters (``parameters``) are the mechanism's, then its own, then its
     actuators', merged by name: one ``p`` mapping carries them all, and each function
@@ -179,6 +182,7 @@ class Model:
     params: Sequence[str] = ()
     actuators: Sequence = ()
     joints: Sequence = ()
+    program_key: str | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "joints", tuple(self.joints))

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..linalg import solve_blocks
+from ..linalg import UNROLL_MAX, parts, solve_small
 from .joints import GROUND, Actuator, Prismatic, Revolute, Slot, joint_name
 from .model import Axial, Model, Moment, PointForce, angle_of, point_of
 from .virtual_power import LoadedState
@@ -149,6 +149,27 @@ def _write_loads(sys_: _System, model: Model, st: LoadedState):
             sys_.applied(ld.bodies[1], force=-T * e, at=pb)
 
 
+def _solve(sys_: _System, order, ok, dtype):
+    """The unknowns of the system, block by block in the static solving order: each block's
+    equations less the earlier blocks' share (only the entries that are there), one small
+    dense solve per block.  NaN where the position failed."""
+    zero = jnp.zeros((), dtype)
+    x: dict = {}
+    for rows, cols in order:
+        rhs = []
+        for i in rows:
+            r = jnp.asarray(sys_.rhs.get(i, zero), dtype)
+            for j, xj in x.items():
+                if (i, j) in sys_.a:
+                    r = r - sys_.a[(i, j)] * xj
+            rhs.append(r)
+        sub = jnp.stack([jnp.stack([jnp.asarray(sys_.a.get((i, j), zero), dtype) for j in cols]) for i in rows])
+        sub = jnp.where(ok, sub, jnp.eye(len(rows), dtype=dtype))
+        xb = solve_small(sub, jnp.stack(rhs)) if len(rows) <= UNROLL_MAX else jnp.linalg.solve(sub, jnp.stack(rhs))
+        x.update(zip(cols, parts(xb, 0)))
+    return jnp.where(ok, jnp.stack([x[j] for j in range(len(x))]), jnp.nan)
+
+
 def joint_reactions(model: Model, st: LoadedState):
     """Every joint's reaction and every drive's effort at one solved state.
 
@@ -167,14 +188,7 @@ def joint_reactions(model: Model, st: LoadedState):
     sys_ = _System(model, st)
     geometry = _write_joints(sys_, model, st)
     _write_loads(sys_, model, st)
-    n = lay.size
-    zero = jnp.zeros((), dtype)
-    a = jnp.stack([jnp.stack([jnp.asarray(sys_.a.get((i, j), zero), dtype) for j in range(n)]) for i in range(n)])
-    b = jnp.stack([jnp.asarray(sys_.rhs.get(i, zero), dtype) for i in range(n)])
-    ok = st.ok
-    a = jnp.where(ok, a, jnp.eye(n, dtype=dtype))
-    x = solve_blocks(a, b, lay.order)
-    x = jnp.where(ok, x, jnp.nan)
+    x = _solve(sys_, lay.order, st.ok, dtype)
     efforts = jnp.stack([x[c] for c in lay.efforts]) if lay.efforts else jnp.zeros((0,), dtype)
     forces, moments = {}, {}
     mech = model.mechanism

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 from collections import deque
 
 from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
@@ -272,6 +273,11 @@ class _Builder:
         return left[k:] + negate(right[k:])
 
 
+def hash_text(text: str) -> str:
+    """SHA-256 of a text (hex)."""
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def _joint_names(b: _Builder) -> dict:
     """Each edge's name: a pin by its point (``"B:rocker"`` where several pins share it), a
     slider ``"block on guide"``, a slot ``"pin in body"``."""
@@ -384,7 +390,10 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
     own = [f"{k}_{link}" for link in b.links for k in ("m", "J")] + ["g"]
     own += [f"F{c}_{x}" for x, _ in top.forces for c in "xy"] + [f"M_{link}" for link in top.moments]
     own += [n for n in top.extra if n not in own]
-    return Model(mech, bodies=bodies, loads=loads, params=tuple(own), joints=joints)
+    # Every function of the model is written here from the topology (covered by the stored
+    # programs' source hash), so the topology identifies it; a user's own loads do not.
+    key = None if top.loads or mech.program_key is None else f"linkage {mech.program_key} {hash_text(repr(dataclasses.replace(top, name='')))}"
+    return Model(mech, bodies=bodies, loads=loads, params=tuple(own), joints=joints, program_key=key)
 
 
 @functools.lru_cache(maxsize=64)
