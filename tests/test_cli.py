@@ -21,6 +21,7 @@ from jaxmech.cli import main  # noqa: E402
 from jaxmech.scenes import scene_names  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+LINKAGES = ROOT / "tests" / "data" / "linkages"  # broken linkage files, one mistake each
 # Compiled kernels are cached between the subprocesses (and between test sessions: the
 # cache is keyed by the program, so a stale entry is never used); kept out of the home.
 CACHE = Path(tempfile.gettempdir()) / "jaxmech-test-xla-cache"
@@ -206,6 +207,14 @@ MISTAKES = {
     "sweep output is a folder": (["sweep", "fourbar", "--grid", "a=1:2:3", "--out", "."], "is a folder; give a file name"),
     "animation output is a folder": (["animate", "fourbar", "--out", "made.gif"], "is a folder; give a file name"),
     "run output is a file": (["run", "fourbar", "--out", "a_file"], "is a file, not a folder"),
+    # linkage files
+    "linkage file that is not there": (["run", str(LINKAGES / "nope.toml")], "cannot read"),
+    "linkage file with an unknown key": (["run", str(LINKAGES / "unknown_key.toml")], "unknown key(s) ['joints']"),
+    "linkage file that is not TOML": (["run", str(LINKAGES / "not_toml.toml")], "not valid TOML"),
+    "linkage naming a point it lacks": (["animate", str(LINKAGES / "unknown_point.json")], "names point 'B', which is not in points"),
+    "linkage with a degree of freedom too many": (["run", str(LINKAGES / "open_chain.toml")], "degree(s) of freedom left"),
+    "linkage parameter misspelt": (["run", str(ROOT / "examples" / "linkages" / "watt_sixbar.toml"), "--set", "len_A_C=1"],
+                                   "has no parameter 'len_A_C'; did you mean 'len_A_B'?"),
     # command-line syntax
     "no verb": ([], "required"),
     "unknown verb": (["plot"], "invalid choice"),
@@ -325,3 +334,24 @@ def test_report_runs_scenes_into_a_folder(tmp_path):
     for rel in images:
         assert (tmp_path / rel).is_file()
     assert "scene fourbar" in proc.stdout
+
+
+def test_run_a_linkage_file_gives_every_joint_force(tmp_path):
+    """``jaxmech run FILE.toml``: the six-bar file's table holds the crank torque and every
+    joint's reaction, equal to the Python API's along the same constant-speed stroke."""
+    import jaxmech as jm
+
+    path = ROOT / "examples" / "linkages" / "watt_sixbar.toml"
+    proc = jaxmech("run", path, "--points", 37, "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    head, data = read_csv(tmp_path / "watt_sixbar.csv")
+    assert np.all(data[:, head.index("status[-]")] == 0)
+    lk = jm.load_linkage(path)
+    t = data[:, head.index("t[s]")]
+    res = lk.inverse_dynamics(jm.ConstantSpeed(np.pi / 3, 2 * np.pi), t)  # [stroke]: from 60deg at 60rpm
+    tau = np.asarray(res.tau[:, 0])
+    assert np.max(np.abs(data[:, head.index("effort_theta_crank[N m]")] - tau)) <= 1e-9 * np.max(np.abs(tau))
+    for joint in lk.joints:
+        f = np.asarray(res.joints[joint])
+        got = data[:, head.index(f"F_{joint}_x[N]")] + 1j * data[:, head.index(f"F_{joint}_y[N]")]
+        assert np.max(np.abs(got - f)) <= 1e-9 * np.max(np.abs(f)), joint
