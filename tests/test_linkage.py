@@ -19,7 +19,6 @@ jax.config.update("jax_enable_x64", True)
 
 import functools  # noqa: E402
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 

@@ -8,7 +8,7 @@ forward dynamics.  One module per concept:
 - ``inverse``: inverse dynamics over batches of states or along a drive, and statics at
   given poses;
 - ``closure``: closing the loop at a new input by a fixed number of Newton steps;
-- ``statics``: equilibrium of a force-driven model;
+- ``static_equilibrium``: equilibrium of a force-driven model (``equilibrium``);
 - ``forward``: forward dynamics by an implicit Runge-Kutta method;
 - ``status``: the result codes of statics and forward dynamics.
 
@@ -44,8 +44,8 @@ from .model import Model as Model
 from .model import Moment as Moment
 from .model import PointForce as PointForce
 from .model import Potential as Potential
-from .statics import Equilibrium as Equilibrium
-from .statics import equilibrium as equilibrium
+from .static_equilibrium import Equilibrium as Equilibrium
+from .static_equilibrium import equilibrium as equilibrium
 from .status import DynStatus as DynStatus
 from .status import dyn_status_message as dyn_status_message
 from .virtual_power import generalized_forces as generalized_forces
