@@ -150,14 +150,14 @@ ZERO_PARAMETERS = {
 @pytest.mark.parametrize("name", SCENES)
 def test_file_is_the_scene(name):
     """The drawing's parameters, stroke and speed are the hand-written scene's defaults."""
-    lk, hand = linkage(name), get_scene(name)
-    p, ph = lk.defaults, hand.defaults
+    mine, hand = linkage(name), get_scene(name)
+    p, ph = mine.defaults, hand.defaults
     for h, k in SAME_PARAMETERS[name].items():
         assert p[k] == pytest.approx(ph[h], rel=2 * EPS, abs=2 * EPS), (h, k)
     for k in ZERO_PARAMETERS[name]:
         assert abs(p[k]) <= 2 * EPS, k
-    assert tuple(map(float, lk.stroke(p))) == tuple(map(float, hand.stroke(ph)))
-    assert lk.speed == hand.speed
+    assert tuple(map(float, mine.stroke(p))) == tuple(map(float, hand.stroke(ph)))
+    assert mine.speed == hand.speed
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -202,70 +202,61 @@ def test_unloaded_efforts_are_zero(name):
         assert np.all(table[k] == 0.0), k
 
 
-# Mass properties for the four-bar's dynamics check: (kg, length) per link, uniform bars.
-FOURBAR_MASSES = {"crank": (1.0, 1.0), "coupler": (3.0, 3.0), "rocker": (2.5, 2.5)}
+# The four-bar's bodies for the dynamics check: uniform bars, (mass kg, length m), and the
+# pins on each with the sign of the pin's reaction on it (a joint's reaction is the force of
+# its first body on its second: O2 ground on crank, A crank on coupler, B coupler on rocker,
+# O4 ground on rocker).
+FOURBAR_BODIES = {
+    "crank": (1.0, 1.0, (("O2", 1.0), ("A", -1.0))),
+    "coupler": (3.0, 3.0, (("A", 1.0), ("B", -1.0))),
+    "rocker": (2.5, 2.5, (("B", 1.0), ("O4", 1.0))),
+}
+FOURBAR_ENDS = {"crank": ("O2", "A"), "coupler": ("A", "B"), "rocker": ("O4", "B")}
+FOURBAR_ANGLES = {"crank": "theta2", "coupler": "theta3", "rocker": "theta4"}
 G = 9.81
-
-
-def _cross(r, f):
-    return np.imag(np.conj(r) * f)
 
 
 def test_fourbar_effort_and_reactions_newton_euler():
     """The four-bar with uniform bars and gravity (set as parameters of the file's scene):
     the crank torque and the four pins' reactions against the per-body Newton-Euler
-    equations solved with numpy on the hand-written scene's kinematics."""
+    equations solved with numpy on the hand-written scene's kinematics (its points' positions
+    and accelerations, its angular accelerations)."""
     over = {"g": G}
-    for link, (m, length) in FOURBAR_MASSES.items():
+    for link, (m, length, _) in FOURBAR_BODIES.items():
         over[f"m_{link}"], over[f"J_{link}"] = m, m * length**2 / 12
     table = linkage_run("fourbar", **over).table()
     hand = hand_run("fourbar")
     ht = hand.table()
-    pos = {k: np.asarray(v[0]) for k, v in hand.motion.points.items()}
-    acc = {k: np.asarray(v[2]) for k, v in hand.motion.points.items()}
-    # centres of mass at the bars' midpoints (the coupler's is the scene's P)
-    G1, G2, G3 = 0.5 * (pos["O2"] + pos["A"]), pos["P"], 0.5 * (pos["O4"] + pos["B"])
-    aG = (0.5 * (acc["O2"] + acc["A"]), acc["P"], 0.5 * (acc["O4"] + acc["B"]))
-    alpha = (ht["theta2_ddot[rad/s^2]"], ht["theta3_ddot[rad/s^2]"], ht["theta4_ddot[rad/s^2]"])
-    (m1, _), (m2, _), (m3, _) = FOURBAR_MASSES.values()
-    J = [over[f"J_{k}"] for k in FOURBAR_MASSES]
+    pos, vel, acc = ({k: np.asarray(v[i]) for k, v in hand.motion.points.items()} for i in range(3))
     n = len(ht["t[s]"])
-    # unknowns: F_O2 (ground on crank), F_A (crank on coupler), F_B (coupler on rocker),
-    # F_O4 (ground on rocker), each (Fx, Fy), and the crank torque
+    # unknowns: the reactions at O2, A, B, O4 (Fx, Fy each) and the crank torque; per body
+    # rows m a_G - m g = sum F, J alpha = sum (r - G) x F (+ the torque on the crank)
+    col = {"O2": 0, "A": 2, "B": 4, "O4": 6}
     A = np.zeros((n, 9, 9))
     rhs = np.zeros((n, 9))
-    col = {"O2": 0, "A": 2, "B": 4, "O4": 6}
-
-    def force(row, joint, sign):
-        A[:, row, col[joint]] = sign
-        A[:, row + 1, col[joint] + 1] = sign
-
-    def moment(row, joint, sign, r):  # sign * (r x F) on the body, r from its centre of mass
-        A[:, row, col[joint]] = -sign * np.imag(r)
-        A[:, row, col[joint] + 1] = sign * np.real(r)
-
     gvec = -1j * G
-    for k, (m, body) in enumerate(((m1, ((("O2", 1), ("A", -1)))), (m2, (("A", 1), ("B", -1))), (m3, (("B", 1), ("O4", 1))))):
-        f = m * (aG[k] - gvec)
-        rhs[:, 3 * k], rhs[:, 3 * k + 1], rhs[:, 3 * k + 2] = f.real, f.imag, J[k] * alpha[k]
-        Gk = (G1, G2, G3)[k]
-        for joint, sign in body:
-            force(3 * k, joint, sign)
-            moment(3 * k + 2, joint, sign, pos[joint] - Gk)
+    power = 0.0  # the reference's own check: tau omega = sum m a_G . v_G + J alpha omega - m g . v_G
+    for k, (link, (m, _, pins)) in enumerate(FOURBAR_BODIES.items()):
+        e1, e2 = FOURBAR_ENDS[link]
+        G_, vG, aG = (0.5 * (x[e1] + x[e2]) for x in (pos, vel, acc))  # the bar's midpoint
+        omega, alpha = ht[f"{FOURBAR_ANGLES[link]}_dot[rad/s]"], ht[f"{FOURBAR_ANGLES[link]}_ddot[rad/s^2]"]
+        J = over[f"J_{link}"]
+        f = m * (aG - gvec)
+        rhs[:, 3 * k], rhs[:, 3 * k + 1], rhs[:, 3 * k + 2] = f.real, f.imag, J * alpha
+        for joint, sign in pins:
+            c, r = col[joint], pos[joint] - G_
+            A[:, 3 * k, c] = A[:, 3 * k + 1, c + 1] = sign
+            A[:, 3 * k + 2, c], A[:, 3 * k + 2, c + 1] = -sign * r.imag, sign * r.real  # r x F
+        power = power + np.real(np.conj(vG) * f) + J * alpha * omega
     A[:, 2, 8] = 1.0  # the drive's torque on the crank
     z = np.linalg.solve(A, rhs[..., None])[..., 0]
+    assert_close(z[:, 8] * ht["theta2_dot[rad/s]"], power, "the reference's torque against the power balance")
     assert_close(table["effort_theta_crank[N m]"], z[:, 8], "crank torque")
     for joint, c in col.items():
         F = z[:, c] + 1j * z[:, c + 1]
         scale = np.max(np.abs(F))  # x and y against the force's magnitude
         assert_close(table[f"F_{joint}_x[N]"], F.real, f"F_{joint}_x", scale)
         assert_close(table[f"F_{joint}_y[N]"], F.imag, f"F_{joint}_y", scale)
-    # the reference holds: the power balance tau omega = dT/dt - P_gravity, summed over the bars
-    vel = {k: np.asarray(v[1]) for k, v in hand.motion.points.items()}
-    vG = (0.5 * (vel["O2"] + vel["A"]), vel["P"], 0.5 * (vel["O4"] + vel["B"]))
-    omega = (ht["theta2_dot[rad/s]"], ht["theta3_dot[rad/s]"], ht["theta4_dot[rad/s]"])
-    power = sum(m * np.real(np.conj(vG[k]) * (aG[k] - gvec)) + J[k] * omega[k] * alpha[k] for k, m in enumerate((m1, m2, m3)))
-    assert_close(z[:, 8] * ht["theta2_dot[rad/s]"], power, "Newton-Euler against the power balance")
 
 
 def test_slider_crank_piston_force():
