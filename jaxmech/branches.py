@@ -21,7 +21,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from .linalg import entries, where
+from .linalg import det_small, entries, where
 from .mechanism import Mechanism
 from .structure import blocks, coords_read
 
@@ -67,20 +67,6 @@ def has_branch(mech: Mechanism) -> bool:
     return mech.branch is not None or bool(auto_blocks(mech))
 
 
-def _det(a):
-    """Determinant of a small square matrix (1x1 to 3x3 written out; LU beyond)."""
-    n = a.shape[0]
-    if n == 1:
-        return a[0, 0]
-    e = entries(a)
-    if n == 2:
-        return e[0][0] * e[1][1] - e[0][1] * e[1][0]
-    if n == 3:
-        return (e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) - e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0])
-                + e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]))
-    return jnp.linalg.det(a)
-
-
 def branch_value(mech: Mechanism, q, u, p, jac=None):
     """Every branch indicator at one sample: the user's (``()`` for one value, as
     ``Mechanism.branch_value`` gives it) when it covers every block, else ``(n,)`` with the
@@ -94,7 +80,7 @@ def branch_value(mech: Mechanism, q, u, p, jac=None):
     if jac is None:
         jac = jax.jacfwd(mech.residual)(q, u, p)
     e = entries(jac)
-    dets = [_det(jnp.stack([jnp.stack([e[i][j] for j in cols]) for i in rows])) for rows, cols in auto]
+    dets = [det_small(jnp.stack([jnp.stack([e[i][j] for j in cols]) for i in rows])) for rows, cols in auto]
     vals = ([] if mech.branch is None else list(jnp.atleast_1d(user))) + dets
     return jnp.stack([jnp.asarray(v, jac.dtype) for v in vals])
 

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["where", "parts", "entries", "UNROLL_MAX", "small_tmatmul", "solve_blocks", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1"]
+__all__ = ["where", "parts", "entries", "UNROLL_MAX", "small_tmatmul", "solve_blocks", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1", "det_small"]
 
 def where(c, x, y):
     """``where(c, x, y)`` written with ``lax.select_n``.
@@ -215,3 +215,31 @@ def cond1(a, blocks=None):
     norm1 = lambda m: small_max(small_sum(jnp.abs(m).T))  # noqa: E731  (max column sum)
     c = norm1(a) * norm1(inv_small(a, blocks))
     return where(jnp.isfinite(c), c, jnp.inf)
+
+
+def det_small(a):
+    """Determinant of a small square matrix: written out to 3x3, Gaussian elimination with
+    partial pivoting (selects, a sign flip per swap) beyond: no LAPACK call (an executable
+    with one does not run when a new process loads it from the store: jaxlib 0.10)."""
+    n = a.shape[-1]
+    if n == 0:
+        return jnp.ones((), a.dtype)
+    e = entries(a)
+    if n == 1:
+        return e[0][0]
+    if n == 2:
+        return e[0][0] * e[1][1] - e[0][1] * e[1][0]
+    if n == 3:
+        return (e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) - e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0])
+                + e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]))
+    ra = parts(a, 0)
+    det = jnp.ones((), a.dtype)
+    for k in range(n):
+        for i in range(k + 1, n):
+            swap = jnp.abs(ra[i][k]) > jnp.abs(ra[k][k])
+            ra[k], ra[i] = where(swap, ra[i], ra[k]), where(swap, ra[k], ra[i])
+            det = where(swap, -det, det)
+        for i in range(k + 1, n):
+            ra[i] = ra[i] - (ra[i][k] / ra[k][k]) * ra[k]
+        det = det * ra[k][k]
+    return det

@@ -61,7 +61,7 @@ from jax.experimental.serialize_executable import deserialize_and_load, serializ
 
 from .cache import compile_cache_dir, switched_off
 
-__all__ = ["cached_call", "cached_chain", "cached_json", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
+__all__ = ["cached_call", "cached_chain", "cached_json", "calls_lapack", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
 
 # What ``cached_call`` did, per process: loaded (a stored executable was used), stored (one
 # was written), fallback (the normal path ran where a key existed but compiling failed).
@@ -204,7 +204,19 @@ def _stored_program(folder: Path | None, key: str):
     return prog
 
 
+def calls_lapack(compiled) -> bool:
+    """Whether a compiled program calls LAPACK (a custom call): such an executable crashes
+    the process that loads it (jaxlib 0.10 registers its LAPACK kernels only when it
+    compiles one itself, jax-ml/jax#28908), so it is never stored."""
+    try:
+        return 'custom_call_target="lapack' in compiled.as_text()
+    except Exception:  # noqa: BLE001 - no text: assume the worst
+        return True
+
+
 def _store(path: Path, compiled) -> None:
+    if calls_lapack(compiled):
+        return
     try:
         # zlib at level 1: a sixth of the size (a 3.3 MB scene program took 0.58 MB) for
         # 13 ms here and 8 ms when loaded

@@ -206,3 +206,49 @@ def test_a_new_drawing_of_a_compiled_topology_compiles_nothing():
     # reactions that scale as forces do (masses unchanged, lengths x1.1)
     np.testing.assert_allclose(np.asarray(second.q), np.asarray(first.q), rtol=0, atol=1e-9)
     assert not np.allclose(np.asarray(second.tau), np.asarray(first.tau))
+
+
+def test_a_program_that_calls_lapack_is_not_stored():
+    """An executable with a LAPACK custom call crashes the process that loads it (jaxlib 0.10):
+    it runs here and is never written; a LAPACK-free one is."""
+    from jaxmech import stored
+
+    if stored.store_dir() is None:
+        import pytest
+
+        pytest.skip("the store is switched off in this environment")
+    a, b = jnp.eye(3) * 2.0, jnp.ones(3)
+    assert stored.calls_lapack(jax.jit(jnp.linalg.solve).lower(a, b).compile())
+    assert not stored.calls_lapack(jax.jit(jnp.matmul).lower(a, b).compile())
+    # programs of their own, new to every cache (a constant drawn per run): compiled here,
+    # through the store, not found in JAX's persistent cache
+    k = float(np.random.default_rng().uniform(1.0, 2.0))  # static: part of the store's key
+
+    def scaled_solve(k, a, b):  # the store keys a program by its function's name
+        return jnp.linalg.solve(a, b) * k
+
+    def scaled_product(k, a, b):
+        return (a @ b) * k
+
+    solve, plain = jax.jit(scaled_solve, static_argnums=0), jax.jit(scaled_product, static_argnums=0)
+    before = stored.store_stats()["stored"]
+    np.testing.assert_allclose(np.asarray(stored.cached_call(solve, (k,), (a, b))), 0.5 * k)
+    stored.wait_for_stores()
+    assert stored.store_stats()["stored"] == before
+    np.testing.assert_allclose(np.asarray(stored.cached_call(plain, (k,), (a, b))), 2.0 * k)
+    stored.wait_for_stores()
+    assert stored.store_stats()["stored"] == before + 1
+
+
+def test_determinants_without_lapack_match_numpy():
+    """The automatic assembly-mode indicator of a block larger than 3x3 is its determinant by
+    elimination (no LAPACK call in a stored program)."""
+    from jaxmech.linalg import det_small
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 4, 5, 6):
+        for _ in range(5):
+            a = rng.normal(size=(n, n))
+            assert abs(float(det_small(jnp.asarray(a))) - np.linalg.det(a)) <= 1e-12 * max(1.0, abs(np.linalg.det(a)))
+    swap = np.array([[0.0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])  # needs a pivot
+    assert float(det_small(jnp.asarray(swap))) == -1.0

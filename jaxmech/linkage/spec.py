@@ -161,12 +161,12 @@ class Linkage:
                 if isinstance(c, str):
                     if c not in pts:
                         raise ValueError(f"{self.name}: slots[{pin!r}]: centre {c!r} is not a point of {body!r}")
-                    centre = c
+                    slot_centre = c
                 else:
-                    centre = f"centre_{pin}"
-                    self.points[centre] = _point(c, f"slots[{pin!r}].center")
-                    pts.append(centre)
-                slot_specs.append((pin, body, centre))
+                    slot_centre = f"centre_{pin}"
+                    self.points[slot_centre] = _point(c, f"slots[{pin!r}].center")
+                    pts.append(slot_centre)
+                slot_specs.append((pin, body, slot_centre))
             elif "angle" in spec:
                 self.slot_angles[pin] = _number(spec["angle"], "rad", f"slots[{pin!r}].angle")
                 slot_specs.append((pin, body, ""))
