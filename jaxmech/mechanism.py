@@ -295,10 +295,6 @@ class Mechanism:
         """Boolean mask over ``coords``: which dependent coordinates are lengths."""
         return np.array([n in self.lengths for n in self.coords], dtype=bool)
 
-    def input_is_length(self) -> np.ndarray:
-        """Boolean mask over ``inputs``: which driven coordinates are lengths."""
-        return np.array([n in self.inputs and n in self.lengths for n in self.inputs], dtype=bool)
-
     # ------------------------------------------------------------------ evaluation
     def vars_q(self, q) -> Vars:
         return Vars(dict(zip(self.coords, parts(q, -1)))) if self.coords else Vars({})

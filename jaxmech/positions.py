@@ -43,7 +43,6 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
 
 
 @functools.partial(jit, static_argnums=(0, 1))
-@functools.partial(jit, static_argnums=(0, 1))
 def _solve_flat(mech, options, u, p, guess):
     return jax.vmap(lambda u_, p_, g_: solve_one(mech, u_, p_, g_, options))(u, p, guess)
 

@@ -6,9 +6,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..linalg import cond1, solve_small
+from ..linalg import cond1, small_norm, solve_small
 from ..mechanism import Mechanism
 from ..implicit import implicit_root
+from ..newton import evaluator
 from ..branches import branch_value, has_branch, on_branch
 from ..options import SolverOptions, tolerances
 
@@ -33,11 +34,11 @@ def close_loop(mech: Mechanism, u, p, qg, iters: int, options: SolverOptions = S
         return q - solve_small(jax.jacfwd(mech.residual)(q, us, ps), mech.residual(q, us, ps))
 
     q = jax.lax.fori_loop(0, iters, newton_step, stop(qg))
-    r = mech.residual(q, us, ps)
-    scale = mech.length_scale(ps)
-    ok = jnp.all(jnp.isfinite(q)) & (jnp.linalg.norm(r) <= ftol * scale)
-    s_ = jnp.where(jnp.asarray(mech.coord_is_length()), scale, 1.0)
-    ok = ok & (cond1(jax.jacfwd(mech.residual)(q, us, ps) * s_[None, :] / scale) <= cond_max)
+    # judged in the solver's scaled variables (newton.evaluator): residual over its scale
+    # (the length scale, or the mechanism's residual_scale), lengths over the length scale
+    r, js = evaluator(mech, us, ps, qg.dtype)[0](q)
+    ok = jnp.all(jnp.isfinite(q)) & (small_norm(r) <= ftol)
+    ok = ok & (cond1(js) <= cond_max)
     if has_branch(mech):
         ok = ok & on_branch(jnp.sign(branch_value(mech, stop(qg), us, ps)), branch_value(mech, q, us, ps))
     q_star = jnp.where(ok, q, jnp.nan)
