@@ -51,14 +51,15 @@ def _number(v, unit: str, what: str) -> float:
     return x
 
 
-def _point(v, what: str) -> complex:
+def _point(v, what: str, unit: str = "m") -> complex:
+    """``(x, y)`` (numbers in `unit`, or strings with a unit) as a complex number."""
     if isinstance(v, complex):
         return v
     try:
         x, y = v
     except (TypeError, ValueError):
-        raise ValueError(f"{what}: a point is (x, y) in m, got {v!r}") from None
-    return complex(_number(x, "m", what), _number(y, "m", what))
+        raise ValueError(f"{what}: give (x, y) in {unit}, got {v!r}") from None
+    return complex(_number(x, unit, what), _number(y, unit, what))
 
 
 def _wrap(a: float) -> float:
@@ -183,7 +184,7 @@ class Linkage:
             raise ValueError(f"{self.name}: say what is driven: driver= a crank link, a slider or an actuator")
         drivers = tuple(f"block_{d}" if d in self.points and f"block_{d}" in block_of else d for d in drivers)
         self.mass_spec = self._masses(links, mass, inertia, centre)
-        g_vec = None if gravity is None else (complex(0, -_number(gravity, "m/s^2", "gravity")) if np.ndim(gravity) == 0 else _point(gravity, "gravity"))
+        g_vec = None if gravity is None else (complex(0, -_number(gravity, "m/s^2", "gravity")) if np.ndim(gravity) == 0 else _point(gravity, "gravity", "m/s^2"))
         self.g = 0.0 if g_vec is None else abs(g_vec)
         force_specs, self.force_values = [], {}
         for x, spec in dict(forces or {}).items():
@@ -193,7 +194,7 @@ class Linkage:
             if on not in links:
                 raise ValueError(f"{self.name}: forces[{x!r}]: say which link it acts on (on=); the point is on {owners}")
             force_specs.append((x, on))
-            self.force_values[x] = _point(spec["force"], f"forces[{x!r}]")
+            self.force_values[x] = _point(spec["force"], f"forces[{x!r}]", "N")
         self.moment_values = {k: _number(v, "N m", f"moments[{k!r}]") for k, v in dict(moments or {}).items()}
         for k in self.moment_values:
             if k not in links:
@@ -202,11 +203,16 @@ class Linkage:
         self.links = links
         self.ground = ground
         self.topology = Topology(
-            name=self.name, points=tuple(self.points), links=tuple((k, tuple(v)) for k, v in links.items()),
+            # the name is not the user's: every drawing of one topology shares compiled programs
+            name="linkage", points=tuple(self.points), links=tuple((k, tuple(v)) for k, v in links.items()),
             ground=tuple(ground), actuators=tuple(acts.items()), sliders=tuple(block_of.items()), slots=tuple(slot_specs),
             drivers=drivers, gravity=(-1j if g_vec is None or abs(g_vec) == 0 else g_vec / abs(g_vec)),
             forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra))
-        self.built: Built = build(self.topology)
+        try:
+            self.built: Built = build(self.topology)
+        except ValueError as err:  # said in the linkage's own name
+            text = str(err)
+            raise ValueError(f"{self.name}: {text.removeprefix('linkage: ')}") from None
         self._values = self._drawing_values()
 
     # ----------------------------------------------------------------- mass properties

@@ -392,7 +392,7 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
     own += [n for n in top.extra if n not in own]
     # Every function of the model is written here from the topology (covered by the stored
     # programs' source hash), so the topology identifies it; a user's own loads do not.
-    key = None if top.loads or mech.program_key is None else f"linkage {mech.program_key} {hash_text(repr(dataclasses.replace(top, name='')))}"
+    key = None if top.loads or mech.program_key is None else f"linkage {mech.program_key} {hash_text(repr(top))}"
     return Model(mech, bodies=bodies, loads=loads, params=tuple(own), joints=joints, program_key=key)
 
 
