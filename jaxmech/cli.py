@@ -4,6 +4,7 @@
 jaxmech scenes [SCENE]
 jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR]
 jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.html]
+jaxmech export SCENE [--at VALUE] --out FILE.dxf|FILE.svg [--set NAME=VALUE ...] [--stroke [--points N]] [--units m|mm]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
 jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ...] [--seed S] [--figures [--figure NAME=MOD:FN]] --out DIR.parquet
 jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
@@ -203,6 +204,21 @@ def _parser() -> _Parser:
     a.add_argument("--fps", type=_positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
     a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif or FILE.html (default ./SCENE.gif)")
 
+    e = sub.add_parser(
+        "export",
+        help="export a pose (or the stroke) of a scene to DXF or SVG for CAD",
+        description="Solve SCENE at input VALUE (moved there from the stroke's start) and write it to FILE.dxf (ezdxf: "
+        "a layer per link, joints as circles, ground marks) or FILE.svg (a group per link), coordinates in full "
+        "precision. --stroke adds the traced points' paths and the positions the links sweep through.",
+    )
+    e.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
+    e.add_argument("--at", default=None, metavar="VALUE", help="the input's value (SI, or with its unit: 60deg, 450mm); default: the stroke's start")
+    e.add_argument("--out", required=True, metavar="FILE", help="FILE.dxf or FILE.svg")
+    e.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable")
+    e.add_argument("--stroke", action="store_true", help="add the paths of the traced points over the stroke and the swept positions of the links")
+    e.add_argument("--points", type=_points, default=101, metavar="N", help="with --stroke: inputs over the stroke (default 101)")
+    e.add_argument("--units", choices=("m", "mm"), default="m", help="the drawing's unit (default m)")
+
     s = sub.add_parser(
         "sweep",
         help="sweep a scene over a grid or random designs to CSV or a Parquet dataset",
@@ -331,6 +347,32 @@ def _cmd_animate(args) -> int:
     result = _run(scene, max(101, args.frames), args.overrides)
     anim = animate(result, out, frames=args.frames, fps=args.fps)
     print(f"wrote {out} ({len(anim.frame_indices)} frames)")
+    return 0
+
+
+def _cmd_export(args) -> int:
+    from .export import SUFFIXES, export_pose, export_stroke, input_value
+    from .units import for_reading
+
+    out = Path(args.out)
+    if out.suffix.lower() not in SUFFIXES:
+        raise UsageError(f"--out must end in .dxf or .svg, got {args.out!r}")
+    _check_writable_file(out, "--out")
+    scene = _scene(args.scene)
+    overrides = _overrides(scene, args.overrides)
+    # a linkage file is passed on as its path: its layers are named after its links
+    source = args.scene if args.scene.lower().endswith((".toml", ".json")) else scene
+    try:
+        at = None if args.at is None else input_value(scene, args.at)
+        if args.stroke:
+            export_stroke(source, out, at=at, params=overrides, points=args.points, units=args.units)
+        else:
+            export_pose(source, at, out, params=overrides, units=args.units)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    name = scene.mechanism.inputs[0]
+    shown = "the stroke's start" if at is None else "{} = {:.6g} {}".format(name, *for_reading(at, scene.units.get(name, ""))).rstrip()
+    print(f"wrote {out} ({scene.name} at {shown}{', with its stroke' if args.stroke else ''})")
     return 0
 
 
@@ -466,7 +508,8 @@ def _cmd_report(args) -> int:
     return 1 if failed else 0
 
 
-_VERBS = {"scenes": _cmd_scenes, "run": _cmd_run, "animate": _cmd_animate, "sweep": _cmd_sweep, "report": _cmd_report}
+_VERBS = {"scenes": _cmd_scenes, "run": _cmd_run, "animate": _cmd_animate, "export": _cmd_export, "sweep": _cmd_sweep,
+          "report": _cmd_report}
 
 
 def main(argv=None) -> int:

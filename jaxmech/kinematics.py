@@ -21,6 +21,7 @@ import numpy as np
 
 from .mechanism import Mechanism
 from .continuation import stroke
+from .inputs import as_coords, as_inputs
 from .stored import cached_call
 from .implicit import implicit_root, root_derivatives
 from .options import SolverOptions
@@ -36,6 +37,7 @@ __all__ = [
     "check_samples",
     "Motion",
     "input_derivatives",
+    "one_state",
     "time_derivatives",
     "motion",
     "drive_samples",
@@ -152,8 +154,31 @@ def drive_rates(drive, t, dof: int):
 
 
 # --------------------------------------------------------------------------- derivatives
+def one_state(mech: Mechanism, q, u, **rates):
+    """The arrays of one state for the functions that take one (``input_derivatives``,
+    ``generalized_forces``, ``mass_matrix``...): ``q (m,)``, then ``u`` and each of `rates`
+    (by argument name) ``(dof,)``; for one input a bare number is its ``(1,)``, and a
+    mapping by name is accepted.  ``ValueError`` naming the argument for any other shape, at
+    trace time (a batch: ``jax.vmap`` the function)."""
+    q_in = q
+    q = as_coords(mech, q, "q")
+    if q.ndim != 1:
+        raise ValueError(f"{mech.name}: q must have shape ({len(mech.coords)},) at one state (vmap the function for a batch), "
+                         f"got shape {np.shape(q_in)}")
+    out = [q]
+    for name, x in (("u", u), *rates.items()):
+        x_in = x
+        x = as_inputs(mech, x, name)
+        if x.ndim != 1:
+            raise ValueError(f"{mech.name}: {name} must have shape ({mech.dof},) at one state (vmap the function for a batch), "
+                             f"got shape {np.shape(x_in) if not isinstance(x_in, Mapping) else x.shape[:-1]}")
+        out.append(x)
+    return tuple(out)
+
+
 def input_derivatives(mech: Mechanism, q, u, p):
-    """``dq/du`` and ``d2q/du2`` at one solved sample.
+    """``dq/du`` and ``d2q/du2`` at one solved sample, ``q (m,)`` and ``u (dof,)`` (a number
+    for one input).
 
     Differentiating ``Phi(q(u), u) = 0`` once and twice along the inputs:
 
@@ -166,6 +191,7 @@ def input_derivatives(mech: Mechanism, q, u, p):
     Shapes ``(m, dof)`` and ``(m, dof, dof)``; units rad (or m) per unit input.  Samples
     with NaN positions give zeros (mask them by status).
     """
+    q, u = one_state(mech, q, u)
     ok = jnp.all(jnp.isfinite(q))
     return root_derivatives(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
 

@@ -105,3 +105,46 @@ def test_benchmark_plots_are_committed_and_shown(site):
         assert tracked or not (ROOT / ".git").exists(), f"docs/img/benchmarks/{name}.png is not committed"
         assert f'src="img/benchmarks/{name}.png"' in html and (site / "img" / "benchmarks" / f"{name}.png").is_file()
     assert "a parameter moved" in html  # the live benchmark's table, from results/live.json
+
+
+# A seed document's file name: a number and a hash (``000_0e5ea70f9886b82a``), or "Seed 003".
+SEED_FILE_NAME = re.compile(r"\b\d{3}_[0-9a-f]{8,}\b|\bseed \d{3}\b", re.I)
+SEED_PAGES = sorted((ROOT / "docs" / "seeds").glob("*.md"))
+
+
+@pytest.mark.parametrize("path", SEED_PAGES, ids=[p.stem for p in SEED_PAGES])
+def test_seed_page_is_titled_by_its_document(path):
+    """A seed page's title (its first heading, which the site's navigation shows) is the
+    document's own title with its authors and year, as its Source paragraph gives them; never
+    the seed's file name."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    assert lines[0].startswith("# "), f"{path.name}: the page does not start with its title"
+    title = lines[0][2:]
+    assert not SEED_FILE_NAME.search(title), f"{path.name}: the title names the seed file: {title!r}"
+    m = re.fullmatch(r"(.+) \((.+), (\d{4}(?:/\d{2})?)\)", title)
+    assert m, f"{path.name}: the title is not 'Document title (Authors, year)': {title!r}"
+    text = "\n".join(lines)
+    source = text[text.find("Source:"):].split("\n\n")[0] if "Source:" in text else ""
+    authors = re.split(r", | and ", m.group(2))
+    assert all(a in source for a in authors), f"{path.name}: authors {authors} not in the Source paragraph"
+    assert m.group(3)[:4] in source, f"{path.name}: year {m.group(3)} not in the Source paragraph"
+
+
+def test_no_page_title_names_a_seed_file(site):
+    for page in site.rglob("*.html"):
+        html = page.read_text(encoding="utf-8")
+        for tag in ("title", "h1"):
+            for text in re.findall(rf"<{tag}\b[^>]*>(.*?)</{tag}>", html, re.S):
+                assert not SEED_FILE_NAME.search(text), f"{page.relative_to(site)}: <{tag}> {text.strip()!r}"
+
+
+def test_home_figure_reads_the_crank_angle_in_degrees():
+    """The home page's figure (``scripts/draw_home_figure.py``) titles its panels in degrees,
+    like every other plot; the script writes the titles into the PNG's text."""
+    from PIL import Image
+
+    assert "img/flap_msd_poses.png" in (ROOT / "docs" / "index.md").read_text()
+    with Image.open(ROOT / "docs" / "img" / "flap_msd_poses.png") as im:
+        titles = im.text.get("Description", "").split("; ")
+    assert len(titles) == 3 and all(re.fullmatch(r"alpha = [0-9.]+ deg", t) for t in titles), titles
+    assert titles[0] == "alpha = 275 deg" and titles[-1] == "alpha = 320 deg"  # the stroke, report §1

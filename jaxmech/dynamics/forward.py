@@ -257,6 +257,36 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
 _integrate_jit = jit(integrate, static_argnums=0)
 
 
+def _checked(mech, u0, u_dot0, guess, h, t0, stroke):
+    """The arguments of one run, checked and shaped before anything is traced: `u0`,
+    `u_dot0` ``(dof,)`` (a number for one input, or a mapping by input name), `guess`
+    ``(m,)``, `h` and `t0` numbers, `stroke` ``(lo, hi)`` with each bound a number or
+    ``(dof,)``.  ``ValueError`` naming the argument for any other shape."""
+    dof, m = mech.dof, len(mech.coords)
+
+    def state(x, name, as_array, size, kind):
+        shape = np.shape(x) if not isinstance(x, Mapping) else None
+        x = as_array(mech, x, name)
+        if x.ndim != 1:
+            raise ValueError(f"{mech.name}: {name} must have shape ({size},) ({kind}; one run starts from one "
+                             f"state), got shape {shape if shape is not None else x.shape}")
+        return x
+
+    u0 = state(u0, "u0", as_inputs, dof, f"inputs {mech.inputs}")
+    ud0 = state(u_dot0, "u_dot0", as_inputs, dof, f"inputs {mech.inputs}")
+    guess = state(guess, "guess", as_coords, m, f"coordinates {mech.coords}")
+    for name, x in (("h", h), ("t0", t0)):
+        if np.ndim(x) != 0:
+            raise ValueError(f"{mech.name}: {name} must be a number (s), got shape {np.shape(x)}")
+    if stroke is not None:
+        if len(stroke) != 2:
+            raise ValueError(f"{mech.name}: stroke must be a pair (lo, hi), got {len(stroke)} entries")
+        for name, b in zip(("lo", "hi"), stroke):
+            if np.shape(b) not in ((), (dof,)):
+                raise ValueError(f"{mech.name}: stroke {name} must be a number or have shape ({dof},), got shape {np.shape(b)}")
+    return u0, ud0, guess
+
+
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
                      motor: DCMotor | None = None, voltage=None, current0=0.0, motor_input: str | None = None,
                      actuators: Mapping | None = None, load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
@@ -279,9 +309,10 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
 
     **Arguments**
 
-    - `p`: parameters; `u0`, `u_dot0`: initial inputs and rates ``(dof,)``; `guess`:
-      coordinates near the initial position (picks the branch).
-    - `h`: step (s); `steps`: number of steps (static); `t0`: start time (s).
+    - `p`: parameters; `u0`, `u_dot0`: initial inputs and rates ``(dof,)`` (for one input
+      a number too; or ``{input name: value}``); `guess`: coordinates ``(m,)`` near the
+      initial position (picks the branch).  One run starts from one state: no batch.
+    - `h`: step (s); `steps`: number of steps (static); `t0`: start time (s); numbers.
     - `method`: one of ``METHODS``.
     - `motor`: a ``DCMotor`` on input `motor_input` (default the first); `voltage`: spec of
       its voltage, a parameter name, a number, or ``fn(t, p) -> V``; `current0` (A).  The
@@ -295,12 +326,16 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
       and the rates `v` (coordinates' and inputs', ``v.theta2``) by name, `t` in s; e.g. a
       controller or a prescribed torque (``dict(p)`` gives the mapping the library's
       functions take).
-    - `stroke`: ``(lo, hi)``: the run stops with ``STROKE_END`` when an input leaves it.
+    - `stroke`: ``(lo, hi)``, each a number or ``(dof,)``: the run stops with
+      ``STROKE_END`` when an input leaves it.
     - `newton_tol`: stage-Newton tolerance on the scaled increment (default
       ``newton_tolerance(dtype)``: ``4096 eps``); `newton_max`: its budget.
     - `close_iters`: Newton steps that close the loop at each stage from the step's start
       (the step must be small enough for them to converge; a failure is reported).
     - `options`: ``SolverOptions`` of the initial position solve and of every loop closure.
+
+    **Raises** ``ValueError`` naming the argument for a shape other than these, before
+    anything is traced.
 
     **Returns** a ``Trajectory``.  A run that reaches a singular or unassemblable position,
     a failed step or the stroke end stops there with its ``DynStatus``; later rows are NaN.
@@ -325,9 +360,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
             raise ValueError(f"actuators[{name!r}]: {type(act).__name__} is not a StatefulActuator "
                              f"(n_states, initial_state, force, rate)")
         acts.append((mech.inputs.index(name), act))
-    u0 = as_inputs(mech, jnp.asarray(u0), "u0")
-    ud0 = as_inputs(mech, jnp.asarray(u_dot0), "u_dot0")
-    guess = as_coords(mech, guess)
+    u0, ud0, guess = _checked(mech, u0, u_dot0, guess, h, t0, stroke)
     dtype = jnp.result_type(u0, ud0, guess, float)
     pj = prepare_params(model, p, dtype, tuple(n for _, a in acts for n in parameter_names(a)))
     parts = [u0.astype(dtype), ud0.astype(dtype)]

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from ..linalg import solve_small
 from ..actuators import resolve
-from ..kinematics import time_derivatives
+from ..kinematics import one_state, time_derivatives
 from ..mechanism import Vars
 from ..implicit import implicit_root
 from .model import Axial, Gravity, Model, Moment, PointForce, Potential, geometry, masses
@@ -205,6 +205,7 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     the motion; `lam` the multipliers (N for complex loops in metres; see the module
     docstring for the sign).
     """
+    q, u, u_dot, u_ddot = one_state(model.mechanism, q, u, u_dot=u_dot, u_ddot=u_ddot)
     st = loaded_state(model, q, u, u_dot, u_ddot, p, t, inertia=inertia, q_dot=q_dot, q_ddot=q_ddot)
     return balance(model, st)
 
@@ -213,6 +214,7 @@ def mass_matrix(model: Model, q, u, p):
     """Generalized mass matrix in the inputs, ``(dof, dof)`` (kg, kg m, kg m^2):
     ``M = sum m (dr_G/du)^T (dr_G/du) + J (dphi/du)^T (dphi/du)``, with ``dq/du`` implicit."""
     mech = model.mechanism
+    q, u = one_state(mech, q, u)
     p = dict(p)
     ok, q = _safe(model, q, u, p)
 
@@ -232,6 +234,7 @@ def mass_matrix(model: Model, q, u, p):
 def kinetic_energy(model: Model, q, u, u_dot, p):
     """``T = sum m |v_G|^2 / 2 + J omega^2 / 2`` (J) at one solved state."""
     mech = model.mechanism
+    q, u, u_dot = one_state(mech, q, u, u_dot=u_dot)
     p = dict(p)
     ok, q = _safe(model, q, u, p)
     z = jnp.zeros_like(u_dot)
@@ -246,6 +249,7 @@ def potential_energy(model: Model, q, u, p, t=0.0):
     """Gravity and ``Potential`` loads' energy (J) at one state (``Axial`` laws excluded:
     a general law has no energy; use ``Potential`` for a spring you want counted)."""
     mech = model.mechanism
+    q, u = one_state(mech, q, u)
     rg, *_ = geometry(model, q, u, p)
     m_, _ = masses(model, p)
     V = jnp.zeros((), q.dtype)

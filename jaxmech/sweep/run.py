@@ -23,7 +23,9 @@ from ..scenes.base import Scene
 from ..options import SolverOptions
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..status import Status
-from .dataset import ChunkReport, Dataset, manifest_of, open_dataset, write_manifest, written_counts
+from .dataset import (
+    ROWS_PER_FILE, ROWS_PER_GROUP, ChunkReport, Dataset, DatasetWriter, manifest_of, prepare_dataset, write_manifest,
+)
 from .designs import design_table
 from .evaluate import Figures, design_status
 from .kernel import (
@@ -35,9 +37,9 @@ __all__ = ["SweepSummary", "sweep_dataset", "sweep_scene"]
 
 
 # =========================================================================== chunks
-def chunk_task(scene_ref, figures_ref, job: Job, start: int, params, x64: bool, cache_dir, dataset: Dataset | None):
-    """One chunk, locally or on a Dask worker: run it and either return its arrays or
-    write its file and return a ``ChunkReport``.  On a worker the task itself switches
+def chunk_task(scene_ref, figures_ref, job: Job, start: int, params, x64: bool, cache_dir):
+    """One chunk, locally or on a Dask worker: run it and return its arrays (a streamed
+    sweep writes them where they are gathered).  On a worker the task itself switches
     float64 on (and the client's persistent compilation cache): a worker process does not
     inherit the client's JAX configuration.  The scene and the figures come by name or
     as scattered objects, so every task on a worker hits the same compiled kernel."""
@@ -49,21 +51,20 @@ def chunk_task(scene_ref, figures_ref, job: Job, start: int, params, x64: bool, 
         from ..scenes import get_scene
 
         scene_ref = get_scene(scene_ref)
-    data = run_chunk(scene_ref, dataclasses.replace(job, figures=figures_ref), start, params)
-    return data if dataset is None else dataset.write(data)
+    return run_chunk(scene_ref, dataclasses.replace(job, figures=figures_ref), start, params)
 
 
-def _local_chunks(scene, job, params, starts, dataset):
+def _local_chunks(scene, job, params, starts):
     d = len(next(iter(params.values())))
     for s in starts:
         part = {k: v[s:s + job.chunk] for k, v in params.items()}
         try:
-            yield s, min(s + job.chunk, d), chunk_task(scene, job.figures, job, s, part, False, None, dataset)
+            yield s, min(s + job.chunk, d), chunk_task(scene, job.figures, job, s, part, False, None)
         except Exception as exc:  # noqa: BLE001 - a failed chunk stops nothing else
             yield s, min(s + job.chunk, d), exc
 
 
-def _dask_chunks(client, scene, job, params, starts, dataset, timeout):
+def _dask_chunks(client, scene, job, params, starts, timeout):
     import distributed
 
     d = len(next(iter(params.values())))
@@ -82,7 +83,7 @@ def _dask_chunks(client, scene, job, params, starts, dataset, timeout):
     for s in starts:
         part = {k: v[s:s + job.chunk] for k, v in params.items()}
         fut = client.submit(chunk_task, scene_ref, figures_ref, dataclasses.replace(job, figures=None), s, part, x64, cache_dir,
-                            dataset, pure=False)
+                            pure=False)
         futures[fut] = (s, min(s + job.chunk, d))
     finished = set()
     try:
@@ -156,7 +157,8 @@ class SweepSummary:
     - `rows_written`, `chunks_written`: this run; `chunks_skipped`: already written by an
       earlier run (resumed); `lost`: ``{first design: message}`` of the chunks whose run
       failed in this run (kept as failed rows; a rerun retries them).
-    - `seconds`: wall time of this run; `info`: chunk size, chunks, backend, devices, mode.
+    - `seconds`: wall time of this run; `info`: chunk size, chunks, backend, devices, mode,
+      ``files`` (part files in the dataset), ``lost_files``, ``rows_per_group``, ``rows_per_file``.
     """
 
     path: str
@@ -173,6 +175,7 @@ class SweepSummary:
         """The one-line summary printed at the end of a sweep."""
         return summary_line(self.info.get("label", "sweep"), self.designs, self.counts, self.seconds,
                             f"{self.rows_written} rows written to {self.path}"
+                            + (f" ({self.info['files']} files)" if "files" in self.info else "")
                             + (f", {self.chunks_skipped} chunks already there" if self.chunks_skipped else "")
                             + (f", {len(self.lost)} chunks lost (rerun to retry)" if self.lost else ""))
 
@@ -248,7 +251,7 @@ def sweep_scene(
         job, devices = _dask_job(client, scene, job, names, d, chunk_size, budget)
         per = float("nan")
     starts = list(range(0, d, job.chunk))
-    chunks = _local_chunks(scene, job, params, starts, None) if client is None else _dask_chunks(client, scene, job, params, starts, None, timeout)
+    chunks = _local_chunks(scene, job, params, starts) if client is None else _dask_chunks(client, scene, job, params, starts, timeout)
     cols = status = None
     errors: dict[int, str] = {}
     first_exc = None
@@ -294,17 +297,24 @@ def sweep_dataset(
     client=None,
     options: SolverOptions = SCENE_OPTIONS,
     timeout: float | None = None,
+    rows_per_group: int = ROWS_PER_GROUP,
+    rows_per_file: int = ROWS_PER_FILE,
 ) -> SweepSummary:
     """Run a sweep of any size in bounded memory, streaming it to a Parquet dataset.
 
-    Each chunk of designs is written to its own file in folder `out` as soon as it is
-    finished (by the Dask worker that ran it, with a `client`: the folder must then be
-    on a file system the workers share), so host memory holds one chunk, whatever the
-    number of designs.  Rerun with the same arguments after an interruption (a kill, a
-    crash, a lost worker) and the chunks already written are skipped: the dataset ends
-    identical to an uninterrupted run's (same rows, none lost or repeated).  The layout
-    and the columns are described in ``jaxmech.sweep.dataset``; read it back with
-    ``pyarrow.parquet.read_table(out)`` or ``pandas.read_parquet(out)``, without jaxmech.
+    Finished chunks of designs are gathered into row groups of about `rows_per_group`
+    rows, and the row groups into files of about `rows_per_file` rows in folder `out`
+    (with a Dask `client`, the workers send their chunks back and this process writes
+    them), so host memory holds one row group, whatever the number of designs.  Columns
+    have plain names (``theta4_max``, ``status``), their units in the Arrow field metadata;
+    ``pandas.read_parquet(out)``, ``polars.read_parquet(f"{out}/*.parquet")`` or duckdb
+    read it without jaxmech, ``jaxmech.sweep.dataset.read_dataset(out)`` with.  The layout
+    and the columns are described in ``jaxmech.sweep.dataset``.
+
+    Rerun with the same arguments after an interruption (a kill, a crash, a lost worker)
+    and the chunks already written are skipped: the dataset ends with the same rows as an
+    uninterrupted run's, none lost or repeated.  A kill loses at most the chunks of the row
+    group in memory (they are run again); a Ctrl-C or an error writes them first.
 
     **Arguments** as ``sweep_scene``, and:
 
@@ -315,14 +325,21 @@ def sweep_dataset(
       column) or a ``Figures``: reductions computed inside the compiled kernel.
     - `progress`: the progress bar (rate, ETA) and the summary line on stderr; ``None``:
       when stderr is a terminal.
+    - `rows_per_group`, `rows_per_file`: rows of a Parquet row group (default 10^5) and of
+      a file (default 10^6; a file holds whole row groups, a row group whole chunks).  They
+      may change between a run and its rerun.
 
     **Returns** a ``SweepSummary`` (``.line()`` is the one-line summary).
 
     **Raises** ``ValueError`` for bad arguments (as ``sweep_scene``), when `out` is a file,
-    or when it holds a sweep made with other arguments (it names them).  Failed designs
-    are rows with their status (and, if never solved, an ``error`` message), never dropped.
+    when it holds a sweep made with other arguments (it names them), or one written in the
+    first dataset layout (it says how to convert it).  Failed designs are rows with their
+    status (and, if never solved, an ``error`` message), never dropped.
     """
     scene, budget = _prepare(scene, points, chunk_size, memory_budget, "sweep_dataset")
+    for name, v in (("rows_per_group", rows_per_group), ("rows_per_file", rows_per_file)):
+        if not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"sweep_dataset: {name} must be a positive integer, got {v!r}")
     figures = _figures(figures)
     params = design_table(scene, grid, table, who="sweep_dataset")
     d = len(next(iter(params.values())))
@@ -330,7 +347,8 @@ def sweep_dataset(
     t0 = time.perf_counter()
     manifest = manifest_of(scene, params, figures=figures, points=points, options=options,
                            x64=bool(jax.config.jax_enable_x64))
-    chunk, done, lost_before = open_dataset(out, manifest, chunk_size)
+    state = prepare_dataset(out, manifest, chunk_size)
+    chunk, done = state.chunk, state.done
     job = Job(points=points, options=options, figures=figures, chunk=chunk or 0)
     devices = jax.device_count()
     if chunk is not None and all(s in done for s in range(0, d, chunk)):
@@ -340,52 +358,57 @@ def sweep_dataset(
     else:
         job, devices = _dask_job(client, scene, job, names, d, chunk, budget)
     write_manifest(out, manifest, job.chunk)
-    dataset = Dataset(path=str(out), figures=figures is not None, points=points)
+    dataset = Dataset(path=str(out), figures=figures is not None, points=points, scene=scene.name,
+                      parameter_units=tuple((k, scene.parameters.get(k, ("", ""))[0]) for k in names))
+    writer = DatasetWriter(dataset, state, rows_per_group, rows_per_file)
     starts = [s for s in range(0, d, job.chunk) if s not in done]
-    counts: dict[str, int] = {}
-    for f in done.values():
-        for k, v in written_counts(f).items():
-            counts[k] = counts.get(k, 0) + v
-    skipped_designs = sum(min(job.chunk, d - s) for s in done)
-    chunks = _local_chunks(scene, job, params, starts, dataset) if client is None else _dask_chunks(client, scene, job, params, starts, dataset, timeout)
+    counts: dict[str, int] = dict(state.counts)
+    skipped_designs = sum(done.values())
     label = f"sweep {scene.name}"
     rows = written = 0
     lost: dict[int, BaseException] = {}
     names_out = None
+    lost_msgs = {}
     bar = _progress_bar(label, d, skipped_designs, progress)
     shown = not bar.disable
-    with bar:
-        for s, e, res in chunks:
-            if isinstance(res, BaseException):
-                lost[s] = res
-            else:
-                names_out = names_out or res.names
-                rows, written = rows + res.rows, written + 1
-                for k, v in res.counts.items():
-                    counts[k] = counts.get(k, 0) + v
-            bar.update(e - s)
-    lost_msgs = {}
-    if lost:
-        if names_out is None and not done:
-            first = next(iter(lost.values()))
-            raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
-        if names_out is None:
-            import pyarrow.parquet as pq
+    try:
+        chunks = _local_chunks(scene, job, params, starts) if client is None else _dask_chunks(client, scene, job, params, starts, timeout)
+        with bar:
+            for s, e, res in chunks:
+                if isinstance(res, BaseException):
+                    lost[s] = res
+                else:
+                    rep = writer.add(res)
+                    names_out = names_out or rep.names
+                    rows, written = rows + rep.rows, written + 1
+                    for k, v in rep.counts.items():
+                        counts[k] = counts.get(k, 0) + v
+                bar.update(e - s)
+        if lost:
+            if names_out is None and not done:
+                first = next(iter(lost.values()))
+                raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
+            if names_out is None:  # the result columns, as an earlier run wrote them
+                import json
 
-            skip = {"design", "point", *names, "status[-]", "error"}
-            names_out = tuple(n for n in pq.read_schema(next(iter(done.values()))).names if n not in skip)
-            if figures is not None:  # failed_points[-] is a result column, written after status[-]
-                names_out = tuple(n for n in names_out if n != "failed_points[-]") + ("failed_points[-]",)
-        dtype = np.dtype(jnp.result_type(float))
-        for s, exc in sorted(lost.items()):
-            part = {k: v[s:s + job.chunk] for k, v in params.items()}
-            rep: ChunkReport = dataset.write(lost_chunk(job, names_out, s, part, exc, dtype), lost=True)
-            rows += rep.rows
-            counts[Status.NONFINITE.name] = counts.get(Status.NONFINITE.name, 0) + rep.designs
-            lost_msgs[s] = next(iter(rep.errors.values()))
+                import pyarrow.parquet as pq
+
+                names_out = tuple(json.loads(pq.read_schema(state.example).metadata[b"jaxmech.result_columns"]))
+            dtype = np.dtype(jnp.result_type(float))
+            for s, exc in sorted(lost.items()):
+                part = {k: v[s:s + job.chunk] for k, v in params.items()}
+                rep: ChunkReport = writer.add_lost(lost_chunk(job, names_out, s, part, exc, dtype))
+                rows += rep.rows
+                counts[Status.NONFINITE.name] = counts.get(Status.NONFINITE.name, 0) + rep.designs
+                lost_msgs[s] = next(iter(rep.errors.values()))
+        writer.close()
+    except BaseException:
+        writer.abort()  # the chunks in memory are kept: a rerun skips them
+        raise
     info = dict(label=label, chunk_size=job.chunk, n_chunks=-(-d // job.chunk), devices=devices, outputs=job.outputs,
                 backend="local" if client is None else "dask", mode="trace" if figures is None else "figures",
-                retried_lost=len(lost_before))
+                retried_lost=len(state.lost), files=len(writer.parts), lost_files=len(writer.lost_files),
+                rows_per_group=int(rows_per_group), rows_per_file=int(rows_per_file))
     summary = SweepSummary(path=str(out), designs=d, counts=counts, rows_written=rows, chunks_written=written + len(lost),
                            chunks_skipped=len(done), lost=lost_msgs, seconds=time.perf_counter() - t0, info=info)
     if shown:
