@@ -192,7 +192,9 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     **Arguments**
 
     - `q`: solved coordinates ``(m,)`` (NaN gives NaN results); `u`, `u_dot`, `u_ddot`:
-      input position, velocity, acceleration ``(dof,)``; `p`: parameter mapping; `t`: s.
+      input position, velocity, acceleration ``(dof,)`` (a number for one input); `p`:
+      parameter mapping; `t`: s.  One state (``jax.vmap`` it for a batch): another shape
+      raises ``ValueError`` naming the argument.
     - `inertia`: False for the quasi-static balance (inertia left out; velocity-dependent
       loads still see `u_dot`).
     - `q_dot`, `q_ddot`: the coordinates' velocities and accelerations ``(m,)`` when known
