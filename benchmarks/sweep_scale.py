@@ -92,7 +92,7 @@ def read_times(path: Path) -> dict:
         import duckdb
 
         out["duckdb_count_rows"] = _timed(lambda: duckdb.sql(f"SELECT count(*) FROM '{glob}'").fetchall()[0][0])
-        out["duckdb_read_3_columns"] = _timed(lambda: duckdb.sql(f"SELECT {', '.join(READ_COLUMNS)} FROM '{glob}'").fetch_arrow_table().num_rows)
+        out["duckdb_read_3_columns"] = _timed(lambda: duckdb.sql(f"SELECT {', '.join(READ_COLUMNS)} FROM '{glob}'").to_arrow_table().num_rows)
     except ImportError:
         pass
     return out
@@ -202,8 +202,10 @@ def run_case(mode: str, d: int, small: bool = False) -> dict:
     try:
         load0 = os.getloadavg()
         cmd = [sys.executable, "-m", "benchmarks.sweep_scale", "--child", mode, str(d), folder, str(int(small))]
-        out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-        row = json.loads(out.strip().splitlines()[-1])
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode:
+            raise RuntimeError(f"{mode} D={d} failed:\n{proc.stderr[-3000:]}")
+        row = json.loads(proc.stdout.strip().splitlines()[-1])
         row["load_average_before"], row["load_average_after"] = list(load0), list(os.getloadavg())
     finally:
         shutil.rmtree(folder, ignore_errors=True)

@@ -264,6 +264,7 @@ class DatasetWriter:
     def __init__(self, dataset: Dataset, state: DatasetState, rows_per_group: int = ROWS_PER_GROUP,
                  rows_per_file: int = ROWS_PER_FILE):
         self.dataset, self.root = dataset, Path(dataset.path)
+        self.root.mkdir(parents=True, exist_ok=True)
         self.rows_per_group, self.rows_per_file = int(rows_per_group), int(rows_per_file)
         self.pending: list = []  # (table, start, designs, counts)
         self.pending_rows = 0
@@ -452,7 +453,9 @@ def prepare_dataset(path, manifest: dict, chunk_size: int | None) -> DatasetStat
     for f in staged:
         chunks, counts, rows = _read_file_meta(f)
         if all(s in where for s, _ in chunks):
-            f.unlink()  # copied into a part file by a run killed before it removed this
+            # copied into a part file by a run killed before it removed this (or staged twice
+            # by a run interrupted inside its own staging): the same rows, kept once
+            f.unlink()
             continue
         for s, n in chunks:
             if s in where:
@@ -543,7 +546,9 @@ def read_dataset(path, columns=None, *, sort: bool = True):
     plain column names, units in the field metadata, rows in design (and point) order.
 
     Reads this layout and the first one (``NAME[UNIT]`` names, a file per chunk), which it
-    returns as if written today.  `columns`: the names to read (all by default).
+    returns as if written today.  `columns`: the names to read (all by default).  Of an
+    interrupted sweep it reads the finished files (and the lost chunks' failed rows), not
+    the row groups still staged: rerun the sweep to finish it.
     """
     import pyarrow as pa
     import pyarrow.dataset as pads
