@@ -1,5 +1,18 @@
 """Four-bar path synthesis: a coupler point through N target points.
 
+The library function is ``jaxmech.design.synthesize_path`` (free or prescribed crank angles;
+closed, open and partial curves; the error is the distance from each target to the coupler
+curve, ``jaxmech.design.path_error``; designs that lock or change assembly mode within the
+path are infeasible; batched multi-start), for example::
+
+    from jaxmech.design import synthesize_path
+    res = synthesize_path(targets, "closed")          # targets: complex (N,)
+    print(res.report())
+
+This example keeps the small, direct statement below: the same four-bar through the
+engine's position solve (``jaxmech.solve_one``) with its implicit-function Jacobians, fitted
+by scipy, used by ``examples/tolerance_study.py`` and ``benchmarks/design.py``.
+
 The classic linkage design task.  Choose the crank pivot ``(x0, y0)``, the ground line's
 angle ``phi``, the link lengths ``a`` (crank), ``b`` (coupler), ``c`` (rocker), ``d``
 (ground), and the coupler point ``(px, py)`` in the coupler's frame, so that the coupler

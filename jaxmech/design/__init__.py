@@ -12,6 +12,9 @@ tolerance and costs about one extra stroke evaluation whatever the number of par
 - ``peak`` takes a maximum over the stroke in a way whose gradient is right.
 - ``fit`` runs optax from a batch of starting designs at once (multi-start) and says which
   start won and why each of the others stopped.
+- ``synthesize_path`` finds a four-bar whose coupler curve passes through (or nearest to)
+  target points, closed, open or partial, with or without prescribed crank angles;
+  ``path_error`` is its error measure (distance from each target to the feasible curve).
 
 Failed designs (a sample that does not converge) are masked with ``jnp.where`` on the
 *inputs* of every later computation, so a failure gives a NaN value and a NaN gradient
@@ -26,6 +29,12 @@ from .fitting import StopReason as StopReason
 from .fitting import fit as fit
 from .sensitivities import Sensitivities as Sensitivities
 from .sensitivities import sensitivities as sensitivities
+from .synthesis import PathError as PathError
+from .synthesis import PathSynthesis as PathSynthesis
+from .synthesis import coupler_curve as coupler_curve
+from .synthesis import crank_intervals as crank_intervals
+from .synthesis import path_error as path_error
+from .synthesis import synthesize_path as synthesize_path
 
 __all__ = [
     "FitResult",
@@ -36,4 +45,10 @@ __all__ = [
     "peak",
     "scene_figure",
     "sensitivities",
+    "PathError",
+    "PathSynthesis",
+    "coupler_curve",
+    "crank_intervals",
+    "path_error",
+    "synthesize_path",
 ]
