@@ -148,8 +148,6 @@ def _forward(model, p, guess, u0, ud0):
 
 # Known gaps, in modules this file's author was not to edit (reported with the change):
 # the error is a ValueError, but it names another thing than the argument.
-GAP_BROADCAST = "inverse_dynamics_at: batches that do not broadcast raise numpy's message, which names no argument"
-GAP_LINKAGE = "Linkage.solve/statics: a wrong shape of us/u is reported as 'Samples.u', which the caller never wrote"
 UD, UDD = np.array([0.5]), np.array([0.1])  # documented (dof,) rates for the rows about other arguments
 
 ROWS = [
@@ -164,8 +162,7 @@ ROWS = [
     *_forms("inverse_dynamics_at", "u", lambda u: jm.inverse_dynamics_at(FB_MODEL, u, UD, UDD, P, G), BATCH),
     *_forms("inverse_dynamics_at", "u_dot", lambda ud: jm.inverse_dynamics_at(FB_MODEL, UB, ud, UDD, P, G),
             [("scalar", 0.5, "doc", None), ("(dof,)", np.array([0.5]), "doc", "scalar"), ("(N,)", np.full(3, 0.5), "doc", None),
-             ("(N, dof)", np.full((3, 1), 0.5), "doc", "(N,)"), ("(N, 2)", np.ones((3, 2)), "err", None)],
-            xfail={"(N, 2)": GAP_BROADCAST}),
+             ("(N, dof)", np.full((3, 1), 0.5), "doc", "(N,)"), ("(N, 2)", np.ones((3, 2)), "err", None)]),
     *_forms("statics", "u", lambda u: jm.statics(FB_MODEL, u, P, G), BATCH),
     *_forms("equilibrium", "bounds", lambda b: jm.equilibrium(FB_MODEL, P, b, G),
             [("scalar", (1.0, 1.6), "doc", None), ("(dof,)", (np.array([1.0]), np.array([1.6])), "doc", "scalar")]),
@@ -188,11 +185,9 @@ ROWS = [
     *_forms("potential_energy", "u", lambda u: jm.potential_energy(FB_MODEL, Q, u, P), ONE_STATE),
     *_forms("input_derivatives", "u", lambda u: jm.input_derivatives(FB, Q, u, P), ONE_STATE),
     *_forms("Linkage.solve", "us", lambda u: LK.solve(u), [(f, LK_U if f == "(N,)" else LK_U[:, None] if f == "(N, dof)" else v, e, s)
-                                                          for f, v, e, s in STROKE],
-            xfail={"scalar": GAP_LINKAGE, "(N, 2)": GAP_LINKAGE}),
+                                                          for f, v, e, s in STROKE]),
     *_forms("Linkage.statics", "u", lambda u: LK.statics(u), [("(N,)", LK_U, "doc", None), ("(N, dof)", LK_U[:, None], "doc", "(N,)"),
-                                                              ("(N, 2)", np.ones((3, 2)), "err", None)],
-            xfail={"(N, 2)": GAP_LINKAGE}),
+                                                              ("(N, 2)", np.ones((3, 2)), "err", None)]),
     *_forms("Linkage.motion", "drive", _law_or_samples(lambda d, t: LK.motion(d, t)),
             [("scalar", _drive(LK_U[0], 0.5), "doc", None), ("(dof,)", _drive(LK_U[:1], np.array([0.5])), "doc", "scalar"),
              ("Samples (N,)", jm.Samples(LK_U, 0.5, 0.0), "doc", None),

@@ -308,7 +308,10 @@ def interior_point(evaluate, x0, p: int, m: int, options: IPOptions = IPOptions(
         trial = lp.phase == 2
         phi = _merit(f, c, lp.st_s, st.mu, st.nu, p)
         alpha = st.alpha
-        good = trial & ok & (phi <= lp.phi0 + 1e-4 * alpha * jnp.minimum(lp.dphi, 0.0))
+        # Armijo on the merit, with room for its round-off (near the optimum a decrease below
+        # 10 eps |phi| cannot be told from noise; IPOPT relaxes its test the same way)
+        slack = 10.0 * float(jnp.finfo(dtype).eps) * jnp.abs(lp.phi0)
+        good = trial & ok & (phi <= lp.phi0 + 1e-4 * alpha * jnp.minimum(lp.dphi, 0.0) + slack)
         accept = good | ready
         x_new = lp.xt
         s_new = where(ready, s0, jnp.maximum(lp.st_s, 1e-300))

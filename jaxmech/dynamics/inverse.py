@@ -16,7 +16,7 @@ import numpy as np
 
 from ..continuation import stroke
 from ..implicit import root_derivatives
-from ..inputs import as_coords, as_inputs
+from ..inputs import as_coords, as_inputs, batch_shape
 from ..kinematics import chain_rule, drive_rates, drive_samples, join_drive, point_kinematics, split_drive
 from ..options import SolverOptions
 from ..positions import solve_one
@@ -147,8 +147,8 @@ def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=
     dtype = jnp.result_type(u, ud, udd, guess, float)
     p = prepare_params(model, p, dtype)
     t = jnp.asarray(t, dtype)
-    shape = np.broadcast_shapes(u.shape[:-1], ud.shape[:-1], udd.shape[:-1], guess.shape[:-1], t.shape,
-                                *[v.shape for v in p.values()])
+    shape = batch_shape(mech, {"u": u.shape[:-1], "u_dot": ud.shape[:-1], "u_ddot": udd.shape[:-1], "guess": guess.shape[:-1],
+                               "t": t.shape, **{f"p[{k!r}]": v.shape for k, v in p.items()}})
     n = int(np.prod(shape, dtype=np.int64))
     flat = lambda x, k: jnp.broadcast_to(x, shape + x.shape[x.ndim - k:]).reshape((n,) + x.shape[x.ndim - k:])  # noqa: E731
     args = [flat(x.astype(dtype), 1) for x in (u, ud, udd)]

@@ -366,10 +366,21 @@ class Linkage:
         u, ud, udd = (np.asarray(x) for x in drive_rates(drive, t, mech.dof))
         return Samples(u, ud, udd, t)
 
+    def _stroke(self, us, what: str) -> np.ndarray:
+        """A stroke of inputs as ``(N, dof)``; ``ValueError`` naming `what` otherwise."""
+        dof = self.mechanism.dof
+        u = np.asarray(us, float)
+        if u.ndim == 1 and dof == 1:
+            u = u[:, None]
+        if u.ndim != 2 or u.shape[0] < 1 or u.shape[1] != dof:
+            raise ValueError(f"{self.name}: {what} must be a stroke of shape (N,) or (N, {dof}) with N >= 1 "
+                             f"(inputs {list(self.mechanism.inputs)}), got shape {np.shape(us)}")
+        return u
+
     def solve(self, us, p: Mapping | None = None, *, options: SolverOptions = SolverOptions()):
         """Positions along a stroke of inputs ``us (N,)`` or ``(N, dof)`` (in the order
         given), on the drawing's assembly mode: a ``Solution`` (``sol["theta_rocker"]``)."""
-        s, k = self._approach(check_samples(self.mechanism, Samples(us, 0.0, 0.0)))
+        s, k = self._approach(check_samples(self.mechanism, Samples(self._stroke(us, "us"), 0.0, 0.0)))
         sol = solve_stroke(self.mechanism, s.u, self._p(p), self._guess, options=options)
         return _drop(sol, k)
 
@@ -394,7 +405,8 @@ class Linkage:
         """Statics at the inputs ``u (N,)`` or ``(N, dof)`` (solved in the order given, from
         the drawing): the holding torque or force (``tau``) and every joint's reaction under
         gravity and the loads, at rest."""
-        samples = check_samples(self.mechanism, Samples(u, 0.0, 0.0, np.full(np.shape(u)[:1], float(t))))
+        u = self._stroke(u, "u")
+        samples = check_samples(self.mechanism, Samples(u, 0.0, 0.0, np.full(u.shape[:1], float(t))))
         return self.inverse_dynamics(samples, p=p, quasi_static=True, options=options)
 
 

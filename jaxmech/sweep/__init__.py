@@ -14,15 +14,20 @@ cluster.  A design that fails (cannot be assembled, singular, lost with its chun
 kept, with its status and NaN values; nothing is dropped.
 
 - ``sweep_scene``: every table column of every design, gathered in memory (``SweepResult``).
-- ``sweep_dataset``: streamed to a Parquet dataset, one file per chunk, resumable; in
+- ``sweep_dataset``: streamed to a Parquet dataset (files of about 10^6 rows, row groups of
+  about 10^5, plain column names with their units in the Arrow metadata), resumable; in
   trace mode (every column at every sample) or figures mode (``Figures``: per-design
   reductions over the stroke computed in the kernel, a few numbers per design).
+- ``read_dataset``: a dataset (or an older one, named as the new) as a table;
+  ``convert_dataset``: an older dataset rewritten in the current layout.
 
 Modules: ``evaluate`` (one design, traceable; figures), ``designs`` (grids, random
 designs, value checks), ``kernel`` (compiled chunk kernels), ``result`` (``SweepResult``),
 ``dataset`` (the Parquet layout, resuming), ``run`` (the sweeps).
 """
 
+from .dataset import convert_dataset as convert_dataset
+from .dataset import read_dataset as read_dataset
 from .designs import grid as grid
 from .designs import random_designs as random_designs
 from .evaluate import Figures as Figures
@@ -36,6 +41,8 @@ from .run import sweep_scene as sweep_scene
 
 __all__ = [
     "Figures",
+    "convert_dataset",
+    "read_dataset",
     "SweepResult",
     "SweepSummary",
     "design_columns",
