@@ -24,19 +24,17 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from . import cli_values as values
+from .cli_values import UsageError
+
 __all__ = ["main"]
 
 PROG = "jaxmech"
-
-
-class UsageError(Exception):
-    """A user's mistake: reported as one line on stderr, exit status 2."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,117 +51,6 @@ def _setup_jax():
 
     jax.config.update("jax_enable_x64", True)
     # the persistent compilation cache is switched on by `import jaxmech` (jaxmech.cache)
-
-
-# --------------------------------------------------------------------------- argument parsing
-def _parse_set(items) -> dict[str, str]:
-    """``["a=1.5", "b=20deg"]`` -> ``{"a": "1.5", "b": "20deg"}``, the syntax checked (a
-    number first, finite; each name once); ``UsageError`` for a bad item.  Names and
-    units are checked against the scene by ``_overrides``."""
-    from .units import split_quantity
-
-    out: dict[str, str] = {}
-    for item in items or ():
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or not name:
-            raise UsageError(f"--set expects NAME=VALUE, got {item!r}")
-        try:
-            v, _ = split_quantity(value)
-        except ValueError:
-            raise UsageError(f"--set {name}: {value!r} is not a number (SI units: m, rad, s, kg, N; or a number with its unit, e.g. 65deg)") from None
-        if not np.isfinite(v):
-            raise UsageError(f"--set {name}: value must be finite, got {value!r}")
-        if name in out:
-            raise UsageError(f"--set {name} is given twice")
-        out[name] = value
-    return out
-
-
-def _overrides(scene, raw: dict[str, str]) -> dict[str, float]:
-    """``--set`` values in SI for ``scene``: every name a parameter of it (else the closest
-    valid name), every unit one that fits the parameter's."""
-    from .units import to_si
-
-    out = {}
-    for name, text in raw.items():
-        try:
-            out[name] = to_si(text, scene.unit(name))
-        except ValueError as e:
-            raise UsageError(f"--set {name}: {e}" if name in scene.defaults else str(e)) from None
-    return out
-
-
-def _parse_grid(items) -> dict[str, np.ndarray]:
-    """``["a=0.5:1.5:11"]`` -> ``{"a": linspace(0.5, 1.5, 11)}``; ``UsageError`` if malformed."""
-    grid: dict[str, np.ndarray] = {}
-    for item in items or ():
-        name, sep, rng = item.partition("=")
-        name = name.strip()
-        parts = rng.split(":")
-        if not sep or not name or len(parts) != 3:
-            raise UsageError(f"--grid expects NAME=START:STOP:N, got {item!r}")
-        try:
-            start, stop = float(parts[0]), float(parts[1])
-        except ValueError:
-            raise UsageError(f"--grid {name}: START and STOP must be numbers, got {rng!r}") from None
-        try:
-            n = int(parts[2])
-        except ValueError:
-            raise UsageError(f"--grid {name}: N must be a whole number of values, got {parts[2]!r}") from None
-        if n < 1:
-            raise UsageError(f"--grid {name}: N must be at least 1, got {n}")
-        if not (np.isfinite(start) and np.isfinite(stop)):
-            raise UsageError(f"--grid {name}: START and STOP must be finite, got {rng!r}")
-        if name in grid:
-            raise UsageError(f"--grid {name} is given twice")
-        grid[name] = np.linspace(start, stop, n)
-    return grid
-
-
-def _positive(what):
-    def conv(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what} must be a whole number, got {text!r}") from None
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{what} must be at least 1, got {v}")
-        return v
-
-    return conv
-
-
-def _points(text):
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--points must be a whole number, got {text!r}") from None
-    if v < 2:  # a stroke has two ends
-        raise argparse.ArgumentTypeError(f"--points must be at least 2, got {v}")
-    return v
-
-
-def _check_writable_dir(path: Path, what: str) -> None:
-    """``UsageError`` (one line) unless ``path`` is, or can be made, a writable folder:
-    checked before anything is computed."""
-    if path.exists() and not path.is_dir():
-        raise UsageError(f"{what} {str(path)!r} is a file, not a folder; give a folder name")
-    parent = path
-    while not parent.exists():  # the nearest existing ancestor must be a writable folder
-        parent = parent.parent
-    if not parent.is_dir():
-        raise UsageError(f"{what} {str(path)!r} cannot be created: {str(parent)!r} is a file, not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UsageError(f"{what} {str(path)!r} cannot be written: no write permission in {str(parent)!r}")
-
-
-def _check_writable_file(path: Path, what: str) -> None:
-    """``UsageError`` (one line) unless a file can be written at ``path`` (not a folder;
-    its folder exists or can be made and is writable); checked before computing."""
-    if path.is_dir():
-        raise UsageError(f"{what} {str(path)!r} is a folder; give a file name")
-    _check_writable_dir(path.parent if str(path.parent) else Path("."), f"{what}'s folder for")
 
 
 def _parser() -> _Parser:
@@ -190,7 +77,7 @@ def _parser() -> _Parser:
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     r.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable; 'jaxmech scenes SCENE' lists them")
-    r.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
+    r.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
     r.add_argument("--out", default="jaxmech-out", metavar="DIR", help="output folder (default ./jaxmech-out)")
 
     a = sub.add_parser(
@@ -200,8 +87,8 @@ def _parser() -> _Parser:
     )
     a.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     a.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable")
-    a.add_argument("--frames", type=_positive("--frames"), default=60, metavar="N", help="number of frames (default 60)")
-    a.add_argument("--fps", type=_positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
+    a.add_argument("--frames", type=values.positive("--frames"), default=60, metavar="N", help="number of frames (default 60)")
+    a.add_argument("--fps", type=values.positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
     a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif or FILE.html (default ./SCENE.gif)")
 
     e = sub.add_parser(
@@ -216,7 +103,7 @@ def _parser() -> _Parser:
     e.add_argument("--out", required=True, metavar="FILE", help="FILE.dxf or FILE.svg")
     e.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable")
     e.add_argument("--stroke", action="store_true", help="add the paths of the traced points over the stroke and the swept positions of the links")
-    e.add_argument("--points", type=_points, default=101, metavar="N", help="with --stroke: inputs over the stroke (default 101)")
+    e.add_argument("--points", type=values.points, default=101, metavar="N", help="with --stroke: inputs over the stroke (default 101)")
     e.add_argument("--units", choices=("m", "mm"), default="m", help="the drawing's unit (default m)")
 
     s = sub.add_parser(
@@ -229,7 +116,7 @@ def _parser() -> _Parser:
     )
     s.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     s.add_argument("--grid", action="append", metavar="NAME=START:STOP:N", default=[], help="a parameter axis: N values from START to STOP (SI units); repeatable")
-    s.add_argument("--random", type=_positive("--random"), default=None, metavar="COUNT", help="COUNT random designs, uniform in the --range box")
+    s.add_argument("--random", type=values.positive("--random"), default=None, metavar="COUNT", help="COUNT random designs, uniform in the --range box")
     s.add_argument("--range", dest="ranges", action="append", metavar="NAME=LOW:HIGH", default=[],
                    help="range of a parameter for --random (SI units); repeatable; default: every parameter within +-10%% of its default")
     s.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the random designs (default 0)")
@@ -237,11 +124,11 @@ def _parser() -> _Parser:
     s.add_argument("--figure", dest="figure_fns", action="append", metavar="NAME=MODULE:FUNCTION", default=[],
                    help="with --figures, one more column NAME: FUNCTION(columns, p) -> scalar from an importable module "
                    "(jax.numpy; see jaxmech.sweep.Figures); repeatable")
-    s.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
+    s.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
     s.add_argument("--out", default=None, metavar="FILE",
                    help="output: FILE.csv, or DIR.parquet for a streamed, resumable dataset (default ./SCENE_sweep.csv, "
                    "./SCENE_figures.parquet with --figures)")
-    s.add_argument("--chunk-size", type=_positive("--chunk-size"), default=None, metavar="K", help="designs per compiled batch (default: the sweep's own)")
+    s.add_argument("--chunk-size", type=values.positive("--chunk-size"), default=None, metavar="K", help="designs per compiled batch (default: the sweep's own)")
     s.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar (it is shown only on a terminal anyway)")
 
     rep = sub.add_parser(
@@ -251,7 +138,7 @@ def _parser() -> _Parser:
         "with every summary and plot, and print the summaries.",
     )
     rep.add_argument("--out", default="jaxmech-report", metavar="DIR", help="output folder (default ./jaxmech-report)")
-    rep.add_argument("--points", type=_points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
+    rep.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
     rep.add_argument("--scenes", nargs="+", metavar="NAME", default=None, help="only these scenes (default: all)")
     return p
 
@@ -278,7 +165,7 @@ def _scene(name):
 def _run(scene, points, overrides):
     from .scenes import run_scene
 
-    overrides = _overrides(scene, overrides)
+    overrides = values.overrides(scene, overrides)
     try:
         return run_scene(scene, points=points, **overrides)
     except ValueError as e:
@@ -357,9 +244,9 @@ def _cmd_export(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in SUFFIXES:
         raise UsageError(f"--out must end in .dxf or .svg, got {args.out!r}")
-    _check_writable_file(out, "--out")
+    values.check_writable_file(out, "--out")
     scene = _scene(args.scene)
-    overrides = _overrides(scene, args.overrides)
+    overrides = values.overrides(scene, args.overrides)
     # a linkage file is passed on as its path: its layers are named after its links
     source = args.scene if args.scene.lower().endswith((".toml", ".json")) else scene
     try:
@@ -376,46 +263,6 @@ def _cmd_export(args) -> int:
     return 0
 
 
-def _parse_ranges(items) -> dict[str, tuple[float, float]]:
-    """``["a=0.9:1.1"]`` -> ``{"a": (0.9, 1.1)}``; ``UsageError`` if malformed."""
-    out: dict[str, tuple[float, float]] = {}
-    for item in items or ():
-        name, sep, rng = item.partition("=")
-        name, parts = name.strip(), rng.split(":")
-        if not sep or not name or len(parts) != 2:
-            raise UsageError(f"--range expects NAME=LOW:HIGH, got {item!r}")
-        try:
-            lo, hi = float(parts[0]), float(parts[1])
-        except ValueError:
-            raise UsageError(f"--range {name}: LOW and HIGH must be numbers, got {rng!r}") from None
-        if not (np.isfinite(lo) and np.isfinite(hi) and hi >= lo):
-            raise UsageError(f"--range {name}: need finite LOW <= HIGH, got {rng!r}")
-        if name in out:
-            raise UsageError(f"--range {name} is given twice")
-        out[name] = (lo, hi)
-    return out
-
-
-def _figure_functions(items) -> dict:
-    """``["peak[N m]=mymod:peak"]`` -> ``{"peak[N m]": mymod.peak}``; ``UsageError`` if it cannot be imported."""
-    import importlib
-
-    out = {}
-    for item in items or ():
-        name, sep, ref = item.partition("=")
-        mod, colon, fn = ref.partition(":")
-        if not sep or not name.strip() or not colon or not mod or not fn:
-            raise UsageError(f"--figure expects NAME=MODULE:FUNCTION, got {item!r}")
-        try:
-            obj = getattr(importlib.import_module(mod), fn)
-        except Exception as e:  # noqa: BLE001 - the user's module: any failure is one line
-            raise UsageError(f"--figure {name}: cannot import {ref!r} ({type(e).__name__}: {e})") from None
-        if not callable(obj):
-            raise UsageError(f"--figure {name}: {ref!r} is not a function")
-        out[name.strip()] = obj
-    return out
-
-
 def _sweep_out(args) -> Path:
     """The sweep's destination: checked (and the mode's needs) before anything is computed."""
     if args.random is None and not args.grid_values:
@@ -429,17 +276,17 @@ def _sweep_out(args) -> Path:
     default = f"{args.scene}_figures.parquet" if args.figures else f"{args.scene}_sweep.csv"
     out = Path(args.out or default)
     if out.suffix.lower() == ".parquet":
-        _check_writable_dir(out, "--out")
+        values.check_writable_dir(out, "--out")
     elif args.figures:
         raise UsageError(f"--figures writes a Parquet dataset: give --out DIR.parquet, got {str(out)!r}")
     else:
-        _check_writable_file(out, "--out")
+        values.check_writable_file(out, "--out")
     return out
 
 
 def _cmd_sweep(args) -> int:
     scene = _scene(args.scene)
-    ranges = _parse_ranges(args.ranges)
+    ranges = values.parse_ranges(args.ranges)
     named = {**args.grid_values, **ranges}
     unknown = [n for n in named if n not in scene.defaults]
     if unknown:
@@ -452,7 +299,7 @@ def _cmd_sweep(args) -> int:
     else:
         designs = dict(grid=args.grid_values, table=None)
     out = args.out_path
-    figures = Figures(functions=_figure_functions(args.figure_fns)) if args.figures else None
+    figures = Figures(functions=values.figure_functions(args.figure_fns)) if args.figures else None
     try:
         if out.suffix.lower() == ".parquet":
             res = sweep_dataset(scene, out, **designs, figures=figures, points=args.points, chunk_size=args.chunk_size,
@@ -518,17 +365,17 @@ def main(argv=None) -> int:
     try:
         args = _parser().parse_args(argv)
         # Syntax first (no JAX touched for a mistyped command line), then float64 and the cache.
-        args.overrides = _parse_set(getattr(args, "sets", None))
-        args.grid_values = _parse_grid(getattr(args, "grid", None))
+        args.overrides = values.parse_set(getattr(args, "sets", None))
+        args.grid_values = values.parse_grid(getattr(args, "grid", None))
         if args.verb == "sweep":
             args.out_path = _sweep_out(args)
         if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".html"):
             raise UsageError(f"--out must end in .gif or .html, got {args.out!r}")
         # Destinations are checked before anything is computed.
         if args.verb in ("run", "report"):
-            _check_writable_dir(Path(args.out), "--out")
+            values.check_writable_dir(Path(args.out), "--out")
         elif args.verb == "animate" and args.out:
-            _check_writable_file(Path(args.out), "--out")
+            values.check_writable_file(Path(args.out), "--out")
         _setup_jax()
         return _VERBS[args.verb](args)
     except UsageError as e:

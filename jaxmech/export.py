@@ -38,30 +38,25 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
+from .cad import APPID, UNIT_SCALE, Sheet, write_dxf, write_svg
 from .drawing import check_point, check_spec, spec_points
 from .units import for_reading, to_si
 
-__all__ = ["Pose", "solve_pose", "export_pose", "write_pose", "export_stroke", "input_value", "link_names", "SUFFIXES"]
+__all__ = ["Pose", "solve_pose", "export_pose", "write_pose", "export_stroke", "input_value", "link_names", "SUFFIXES", "APPID"]
 
 #: The file types written, by suffix.
 SUFFIXES = (".dxf", ".svg")
-
-#: XDATA application name of the joint circles in a DXF.
-APPID = "JAXMECH"
 
 #: Samples on the way from the stroke's start to the pose, per stroke length (as dense as
 #: a 101-point run of the stroke).
 PATH_SAMPLES = 101
 #: At most this many stroke lengths from the stroke's start are walked to a pose.
 MAX_STROKES = 64
-
-_UNITS = {"m": 1.0, "mm": 1000.0}
 
 
 # --------------------------------------------------------------------------- what is exported
@@ -233,57 +228,6 @@ def _pose_of_result(result, index: int, names) -> Pose:
                 positions=positions, spec=_spec(scene, result.params), names=names)
 
 
-# --------------------------------------------------------------------------- a drawing in model coordinates
-class _Sheet:
-    """Layers and entities in model coordinates (m), written by ``_write_dxf`` / ``_write_svg``."""
-
-    def __init__(self):
-        self.layers: dict[str, tuple[str, int]] = {}  # name -> (kind, ACI colour)
-        self.items: list[tuple] = []
-
-    def layer(self, name: str, kind: str, color: int) -> str:
-        """The layer ``name`` of this kind (created on first use); a name taken by another
-        kind, or differing only in case (DXF layer names are not case-sensitive), gets a
-        suffix ``_2``, ``_3``..."""
-        taken = {n.lower(): (n, k) for n, (k, _) in self.layers.items()}
-        key, n = name, 2
-        while key.lower() in taken and taken[key.lower()] != (key, kind):
-            key, n = f"{name}_{n}", n + 1
-        self.layers.setdefault(key, (kind, color))
-        return key
-
-    def polyline(self, layer, zs, closed=False):
-        zs = [complex(z) for z in zs]
-        if len(zs) >= 2 and all(np.isfinite(z) for z in zs):
-            self.items.append(("polyline", layer, zs, closed))
-
-    def circle(self, layer, c, r, point=None):
-        if np.isfinite(c):
-            self.items.append(("circle", layer, complex(c), float(r), point))
-
-    def arc(self, layer, c, r, a0, a1):
-        if a1 - a0 >= 2 * math.pi - 1e-12:
-            self.circle(layer, c, r)
-        elif np.isfinite(c):
-            self.items.append(("arc", layer, complex(c), float(r), float(a0), float(a1)))
-
-    def text(self, layer, z, s, h):
-        if np.isfinite(z):
-            self.items.append(("text", layer, complex(z), str(s), float(h)))
-
-    def extent(self):
-        zs = []
-        for it in self.items:
-            if it[0] == "polyline":
-                zs += it[2]
-            elif it[0] in ("circle", "arc"):
-                zs += [it[2] - it[3] * (1 + 1j), it[2] + it[3] * (1 + 1j)]
-            elif it[0] == "text":
-                zs.append(it[2])
-        z = np.array(zs or [0j])
-        return z.real.min(), z.imag.min(), z.real.max(), z.imag.max()
-
-
 def _label(p):
     return p if isinstance(p, str) else None
 
@@ -331,7 +275,7 @@ def _slot_angles(s, paths):
     return lo - margin, hi + margin
 
 
-def _draw_pose(sheet: _Sheet, pose: Pose, r: float, *, paths=None, labels=True):
+def _draw_pose(sheet: Sheet, pose: Pose, r: float, *, paths=None, labels=True):
     spec = pose.spec
     drawn: dict = {}  # named points drawn as joints -> position
     for kind, name, pts, closed in _members(spec, pose.names):
@@ -378,114 +322,24 @@ def _draw_pose(sheet: _Sheet, pose: Pose, r: float, *, paths=None, labels=True):
 
 
 # --------------------------------------------------------------------------- writers
-def _fmt(x: float) -> str:
-    return repr(float(x))
-
-
 def _meta(pose: Pose, units: str) -> dict:
     return {"jaxmech_scene": pose.scene.name, "jaxmech_input": pose.input_name, "jaxmech_value_si": repr(pose.at),
             "jaxmech_input_unit": pose.scene.units.get(pose.input_name, ""), "jaxmech_units": units}
 
 
-def _write_dxf(sheet: _Sheet, path: Path, units: str, meta: dict):
-    import ezdxf
-    from ezdxf import units as dxf_units
-
-    f = _UNITS[units]
-    doc = ezdxf.new("R2010", setup=True)
-    doc.units = dxf_units.M if units == "m" else dxf_units.MM
-    doc.header["$MEASUREMENT"] = 1
-    doc.appids.add(APPID)
-    for k, v in meta.items():
-        doc.header.custom_vars.append(k, str(v))
-    for name, (kind, color) in sheet.layers.items():
-        doc.layers.add(name, color=color)
-    msp = doc.modelspace()
-    xy = lambda z: (z.real * f, z.imag * f)  # noqa: E731
-    for it in sheet.items:
-        kind, layer = it[0], it[1]
-        attrs = {"layer": layer}
-        if kind == "polyline":
-            msp.add_lwpolyline([xy(z) for z in it[2]], format="xy", close=it[3], dxfattribs=attrs)
-        elif kind == "circle":
-            c = msp.add_circle(xy(it[2]), it[3] * f, dxfattribs=attrs)
-            if it[4] is not None:
-                c.set_xdata(APPID, [(1000, "joint"), (1000, it[4])])
-        elif kind == "arc":
-            msp.add_arc(xy(it[2]), it[3] * f, math.degrees(it[4]), math.degrees(it[5]), dxfattribs=attrs)
-        elif kind == "text":
-            msp.add_text(it[3], height=it[4] * f, dxfattribs={**attrs, "insert": xy(it[2])})
-    doc.saveas(path)
-
-
-_SVG_NS = "http://www.w3.org/2000/svg"
-
-
-def _write_svg(sheet: _Sheet, path: Path, units: str, meta: dict, title: str):
-    f = _UNITS[units]
-    x0, y0, x1, y1 = sheet.extent()
-    m = 0.05 * max(x1 - x0, y1 - y0, 1e-9)
-    x0, y0, x1, y1 = (x0 - m) * f, (y0 - m) * f, (x1 + m) * f, (y1 + m) * f
-    w, h = x1 - x0, y1 - y0
-    mm = 1000.0 / f  # mm per user unit: the drawing is 1:1
-    ET.register_namespace("", _SVG_NS)
-    root = ET.Element("svg", {"xmlns": _SVG_NS, "version": "1.1", "width": f"{_fmt(w * mm)}mm", "height": f"{_fmt(h * mm)}mm",
-                              "viewBox": " ".join(_fmt(v) for v in (x0, -y1, w, h)),
-                              **{f"data-{k.replace('_', '-')}": str(v) for k, v in meta.items()}})
-    ET.SubElement(root, "title").text = title
-    ET.SubElement(root, "desc").text = (f"jaxmech export: model coordinates in {units}, y up (the group 'model' flips y); "
-                                        "one group per layer (id), joints are circles with data-point")
-    lw = 0.004 * max(w, h)
-    css = [f"g#model {{ fill: none; stroke-linecap: round; stroke-linejoin: round; stroke-width: {_fmt(lw)}; }}",
-           ".link, .chord { stroke: #222; }", ".chord { stroke: #1f77b4; }",
-           ".plate polygon { fill: #bbb; fill-opacity: 0.6; stroke: #444; }", ".ground { stroke: #555; }",
-           ".slot { stroke: #ff7f0e; }", ".points { stroke: #d62728; }", ".path { stroke: #2ca02c; stroke-dasharray: none; }",
-           f".sweep {{ stroke: #999; stroke-opacity: 0.5; stroke-width: {_fmt(0.5 * lw)}; }}",
-           ".joint { fill: #fff; }", ".labels { fill: #333; stroke: none; font-family: sans-serif; }"]
-    ET.SubElement(root, "style").text = "\n".join(css)
-    model = ET.SubElement(root, "g", {"id": "model", "transform": "scale(1 -1)"})
-    groups = {name: ET.SubElement(model, "g", {"id": name, "class": kind}) for name, (kind, _) in sheet.layers.items()}
-    xy = lambda z: (_fmt(z.real * f), _fmt(z.imag * f))  # noqa: E731
-    for it in sheet.items:
-        kind, g = it[0], groups[it[1]]
-        if kind == "polyline":
-            pts = " ".join(",".join(xy(z)) for z in it[2])
-            ET.SubElement(g, "polygon" if it[3] else "polyline", {"points": pts})
-        elif kind == "circle":
-            cx, cy = xy(it[2])
-            attrs = {"cx": cx, "cy": cy, "r": _fmt(it[3] * f)}
-            if it[4] is not None:
-                attrs.update({"class": "joint", "data-point": it[4]})
-            ET.SubElement(g, "circle", attrs)
-        elif kind == "arc":
-            c, r, a0, a1 = it[2], it[3], it[4], it[5]
-            p0, p1 = c + r * complex(math.cos(a0), math.sin(a0)), c + r * complex(math.cos(a1), math.sin(a1))
-            large = 1 if a1 - a0 > math.pi else 0
-            d = f"M {' '.join(xy(p0))} A {_fmt(r * f)} {_fmt(r * f)} 0 {large} 1 {' '.join(xy(p1))}"
-            ET.SubElement(g, "path", {"d": d})
-        elif kind == "text":
-            x, y = xy(it[2])
-            t = ET.SubElement(g, "text", {"x": "0", "y": "0", "font-size": _fmt(it[4] * f),
-                                          "transform": f"translate({x} {y}) scale(1 -1)"})
-            t.text = it[3]
-    tree = ET.ElementTree(root)
-    ET.indent(tree)
-    tree.write(path, encoding="utf-8", xml_declaration=True)
-
-
-def _write(sheet: _Sheet, pose: Pose, path, units: str, what: str) -> Path:
+def _write(sheet: Sheet, pose: Pose, path, units: str, what: str) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise ValueError(f"export path must end in {' or '.join(SUFFIXES)}, got {str(path)!r}")
-    if units not in _UNITS:
-        raise ValueError(f"units must be one of {list(_UNITS)}, got {units!r}")
+    if units not in UNIT_SCALE:
+        raise ValueError(f"units must be one of {list(UNIT_SCALE)}, got {units!r}")
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = _meta(pose, units)
     if suffix == ".dxf":
-        _write_dxf(sheet, path, units, meta)
+        write_dxf(sheet, path, units, meta)
     else:
-        _write_svg(sheet, path, units, meta, f"{what}: {pose.describe()}")
+        write_svg(sheet, path, units, meta, f"{what}: {pose.describe()}")
     return path
 
 
@@ -526,7 +380,7 @@ def export_pose(obj, at, path, *, params: Mapping | None = None, units: str = "m
 def write_pose(pose: Pose, path, *, units: str = "m", joint_radius: float | None = None, labels: bool = True) -> Path:
     """Write a solved ``Pose`` (``solve_pose``) to ``path`` (``.dxf`` or ``.svg``)."""
     zs = [pose.point(x) for x in spec_points(pose.spec)]
-    sheet = _Sheet()
+    sheet = Sheet()
     _draw_pose(sheet, pose, _radius(joint_radius, zs), labels=labels)
     return _write(sheet, pose, path, units, "pose")
 
@@ -569,7 +423,7 @@ def export_stroke(obj, path, *, at=None, params: Mapping | None = None, points: 
     paths = point_positions(result, spec_points(spec) + trace)
     pose = _pose_of_result(result, 0, names) if at is None else solve_pose(scene, at, params=result.params)
     pose = dataclasses.replace(pose, names=names)
-    sheet = _Sheet()
+    sheet = Sheet()
     r = _radius(joint_radius, [z for v in paths.values() for z in np.ravel(v)])
     _draw_pose(sheet, pose, r, paths=paths, labels=labels)
     for k, t in enumerate(trace):

@@ -308,7 +308,7 @@ def sweep_dataset(
     them), so host memory holds one row group, whatever the number of designs.  Columns
     have plain names (``theta4_max``, ``status``), their units in the Arrow field metadata;
     ``pandas.read_parquet(out)``, ``polars.read_parquet(f"{out}/*.parquet")`` or duckdb
-    read it without jaxmech, ``jaxmech.sweep.dataset.read_dataset(out)`` with.  The layout
+    read it without jaxmech, ``jaxmech.sweep.read_dataset(out)`` with.  The layout
     and the columns are described in ``jaxmech.sweep.dataset``.
 
     Rerun with the same arguments after an interruption (a kill, a crash, a lost worker)

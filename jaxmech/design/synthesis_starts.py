@@ -1,0 +1,169 @@
+"""Starting designs for four-bar path synthesis, in numpy: random four-bar shapes placed
+on the targets by the best similarity (rotation, scale, translation; closed form), crank
+angles spread by arc length, then refined by closest-point iterations
+(``placed_starts``; the method is described in ``jaxmech.design.synthesis``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .coupler_path import TAU, crank_interval, local_point
+
+__all__ = ["placed_starts", "GRID"]
+
+
+# =========================================================================== starts (numpy)
+def _arc_fractions(targets, closed: bool):
+    seg = np.abs(np.diff(targets))
+    if closed:
+        seg = np.append(seg, np.abs(targets[0] - targets[-1]))
+        total = np.sum(seg)
+        return np.concatenate([[0.0], np.cumsum(seg[:-1])]) / max(total, 1e-300)
+    total = np.sum(seg)
+    return np.concatenate([[0.0], np.cumsum(seg)]) / max(total, 1e-300)
+
+
+def _random_shapes(rng, m, rotatable_fraction, cmu):
+    """``m`` random four-bar shapes with ground ``d = 1``: ``(a, b, c, px, py)``; a fraction
+    with a crank that turns fully (with the transmission margin `cmu`), the rest with some
+    usable crank interval."""
+    out = []
+    need_rot = int(round(m * rotatable_fraction))
+    got_rot, got_any = 0, 0
+    for _ in range(200):
+        if got_rot >= need_rot and got_any >= m - need_rot:
+            break
+        k = 4 * m
+        a = np.exp(rng.uniform(np.log(0.08), np.log(2.5), k))
+        b = np.exp(rng.uniform(np.log(0.2), np.log(4.0), k))
+        c = np.exp(rng.uniform(np.log(0.2), np.log(4.0), k))
+        rho = np.exp(rng.uniform(np.log(0.05), np.log(4.0), k)) * np.maximum(b, 1.0)
+        ang = rng.uniform(-np.pi, np.pi, k)
+        px, py = rho * np.cos(ang), rho * np.sin(ang)
+        full, _, half, _, closes = crank_interval(a, b, c, 1.0, cmu)
+        rot = np.flatnonzero(full)[: need_rot - got_rot]
+        other = np.flatnonzero(~full & closes & (half > 0.05))[: m - need_rot - got_any]
+        for idx in (rot, other):
+            out.extend(zip(a[idx], b[idx], c[idx], px[idx], py[idx]))
+        got_rot, got_any = got_rot + rot.size, got_any + other.size
+    return np.array(out).reshape(-1, 5)
+
+
+GRID = 128  #: samples per random shape's coupler curve when placing it on the targets
+
+
+def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, ordered, cmu):
+    """Best-placed random shapes: ``(x (keep, 9), theta (keep, n), mode (keep,), cost (keep,))``
+    in the normalised frame.
+
+    Each shape's coupler curve is sampled once (``GRID`` points over its crank interval);
+    a placement assigns the targets crank angles spread by arc length (a phase, a span, a
+    direction), and is scored by the best similarity (or, with prescribed crank angles,
+    scale and translation) taking the curve points to the targets: closed form."""
+    n = targets_n.size
+    closed = curve == "closed"
+    timed = alpha is not None
+    shapes = _random_shapes(rng, n_shapes, 0.5 if curve == "open" and not timed else 1.0, cmu)
+    a, b, c, px, py = (shapes[:, i] for i in range(5))
+    m = a.size
+    full, center, half, two, _ = crank_interval(a, b, c, 1.0, cmu)
+    mirror = two & (rng.uniform(size=m) < 0.5)
+    lo = np.where(full, -np.pi, np.where(mirror, -center, center) - half)
+    width = np.where(full, TAU, 2 * half)
+    g = np.arange(GRID)
+    grid = lo[:, None] + width[:, None] * np.where(full[:, None], g / GRID, (g + 0.5) / GRID)  # (m, GRID)
+    sub = np.unique(np.round(np.linspace(0, n - 1, min(n, 32))).astype(int))
+    frac = _arc_fractions(targets_n, closed)
+    # placements as positions u in [0, 1) along each shape's interval, (m, P, n)
+    us = []
+    if timed:
+        phis = rng.uniform(-np.pi, np.pi, (m, 8))
+        u = (alpha[None, None, :] - phis[:, :, None] - lo[:, None, None]) / width[:, None, None]
+        u = np.where(full[:, None, None], np.mod(u, 1.0), u)
+        us.append(u)
+    elif closed:
+        for ph in np.linspace(0, 1, 12, endpoint=False):
+            for sgn in (1.0, -1.0):
+                us.append(np.broadcast_to(np.mod(ph + sgn * frac, 1.0), (m, n)))
+    else:
+        for span in (0.35, 0.65, 0.95):
+            for off in (0.0, 0.5, 1.0):
+                for sgn in (1.0, -1.0):
+                    v = off * (1 - span) + span * (frac if sgn > 0 else 1 - frac)
+                    us.append(np.broadcast_to(v * 0.999 + 0.0005, (m, n)))
+    U = us[0] if timed else np.stack(us, axis=1)  # (m, P, n)
+    inside = np.all((U >= 0) & (U < 1), axis=-1)
+    idx = np.clip(np.floor(U[..., sub] * GRID).astype(int), 0, GRID - 1)
+    Ts = targets_n[sub]
+    Tc = Ts - Ts.mean()
+    cands = []
+    for mode in mode_choices:
+        C, s2 = local_point(np, a[:, None], b[:, None], c[:, None], 1.0, px[:, None], py[:, None], mode, grid)
+        C = np.where(s2 >= 0, C, np.nan)
+        P = np.take_along_axis(C[:, None, :], idx.reshape(m, -1, sub.size), axis=2) if U.ndim == 3 else None
+        if timed:
+            rot = np.exp(1j * phis)[:, :, None]
+            Q = rot * P
+            Qc = Q - Q.mean(-1, keepdims=True)
+            k = np.maximum(np.sum((np.conj(Qc) * Tc).real, -1) / np.maximum(np.sum(np.abs(Qc) ** 2, -1), 1e-300), 1e-3)
+            z = k * rot[..., 0]
+            w = Ts.mean() - k * Q.mean(-1)
+            cost = np.sum(np.abs(k[..., None] * Qc - Tc) ** 2, -1)
+        else:
+            Pc = P - P.mean(-1, keepdims=True)
+            z = np.sum(np.conj(Pc) * Tc, -1) / np.maximum(np.sum(np.abs(Pc) ** 2, -1), 1e-300)
+            w = Ts.mean() - z * P.mean(-1)
+            cost = np.sum(np.abs(z[..., None] * Pc - Tc) ** 2, -1)
+        cost = np.where(inside & np.isfinite(cost) & (np.abs(z) > 1e-6), cost, np.inf)
+        cands.append((cost, z, w, mode, C))
+    costs = np.stack([cd[0] for cd in cands])  # (modes, m, P)
+    icp = not (timed or ordered)
+    flat = np.argsort(costs, axis=None)[: (2 * keep if icp else keep)]
+    flat = flat[np.isfinite(costs.reshape(-1)[flat])]
+    gi, i, j = np.unravel_index(flat, costs.shape)
+    z = np.array([cands[g][1][ii, jj] for g, ii, jj in zip(gi, i, j)])
+    w = np.array([cands[g][2][ii, jj] for g, ii, jj in zip(gi, i, j)])
+    mode = np.array([cands[g][3] for g in gi], float)
+    curves = np.stack([cands[g][4][ii] for g, ii in zip(gi, i)]) if flat.size else np.zeros((0, GRID), complex)
+    if icp and flat.size:
+        # closest-point iterations: each target to its nearest point of the placed curve,
+        # then the best similarity again (the distance to the curve, not to a timing guess)
+        for _ in range(2):
+            jj = _nearest(curves, z, w, Ts)
+            P = np.take_along_axis(curves, jj, axis=1)
+            Pc = P - P.mean(-1, keepdims=True)
+            z = np.sum(np.conj(Pc) * Tc, -1) / np.maximum(np.sum(np.abs(Pc) ** 2, -1), 1e-300)
+            w = Ts.mean() - z * P.mean(-1)
+        jj = _nearest(curves, z, w, Ts)
+        P = np.take_along_axis(curves, jj, axis=1)
+        cost = np.sum(np.abs(z[:, None] * P + w[:, None] - Ts) ** 2, -1)
+        cost = np.where(np.isfinite(cost) & (np.abs(z) > 1e-6), cost, np.inf)
+        sel = np.argsort(cost)[:keep]
+        sel = sel[np.isfinite(cost[sel])]
+        jj = _nearest(curves[sel], z[sel], w[sel], targets_n)
+        theta = np.take_along_axis(grid[i[sel]], jj, axis=1)
+        cost = cost[sel]
+    else:
+        sel = np.arange(flat.size)
+        cost = costs.reshape(-1)[flat]
+        theta = lo[i, None] + width[i, None] * U[i, j]
+        theta = np.unwrap(theta, axis=1) if (timed or closed) else theta  # ordered crank angles, unwrapped
+    ii, s_ = i[sel], np.abs(z[sel])
+    lens = np.log(np.stack([a[ii], b[ii], c[ii], np.ones(ii.size)], axis=1) * s_[:, None])
+    x = np.concatenate([np.stack([w[sel].real, w[sel].imag, np.angle(z[sel])], axis=1), lens,
+                        np.stack([px[ii] * s_, py[ii] * s_], axis=1)], axis=1)
+    return x, theta.reshape(-1, n), mode[sel], cost
+
+
+def _nearest(curves, z, w, targets, block=64):
+    """Index of each target's nearest sample on each placed curve ``z C + w``: ``(K, n)``."""
+    out = np.empty((curves.shape[0], targets.size), int)
+    for s0 in range(0, curves.shape[0], block):
+        sl = slice(s0, s0 + block)
+        placed = z[sl, None] * curves[sl] + w[sl, None]  # (k, GRID)
+        d = np.abs(targets[None, :, None] - placed[:, None, :])
+        out[sl] = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=2)
+    return out
+
+
