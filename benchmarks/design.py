@@ -289,7 +289,7 @@ def bench_flap_problem(points=POINTS, starts=4):
     import jax
     from scipy.optimize import minimize as scipy_minimize
 
-    from jaxmech.constrained import minimize, program
+    from jaxmech.design.constrained import minimize, program
     from examples.design_problems import (FLAP_ELIMINATED, FLAP_FREE, FLAP_VARS, flap_bounds, flap_eliminated, flap_msd_objective,
                                   flap_starts, flap_state, flap_state_bounds)
     from jaxmech.scenes.flap_msd import DEFAULTS

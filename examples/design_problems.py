@@ -11,7 +11,7 @@ one of the scenes, answers it with ``jaxmech.design`` and reports the answer in 
 
 ``flap_msd`` is stated as an engineer states it (``flap_state``: the peak torque in
 epigraph form at every stroke sample, the travel equalities, a transmission-angle limit at
-every sample, a box) and solved by ``jaxmech.constrained.minimize`` (scipy SLSQP fed with
+every sample, a box) and solved by ``jaxmech.design.constrained.minimize`` (scipy SLSQP fed with
 exact Jacobians from one compiled program).  ``flap_msd_objective`` keeps the older
 statement (smooth peak, ``h`` and ``z`` eliminated) that ``benchmarks/design.py`` gives
 Nelder-Mead.  ``landing_gear`` and ``arc_track_flap`` minimise ``scene_figure`` objectives
@@ -242,7 +242,7 @@ def _flap_sample(p, alpha):
 
 @functools.cache
 def flap_state(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSION):
-    """``flap_msd`` as an engineer states it, for ``jaxmech.constrained``: ``x -> Stated``
+    """``flap_msd`` as an engineer states it, for ``jaxmech.design.constrained``: ``x -> Stated``
     over ``FLAP_VARS`` (m).
 
     - peak: the motor torque at ``points`` crank angles, 275 -> 320 deg at 1 rad/s (N m,
@@ -257,7 +257,7 @@ def flap_state(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSIO
     import types
 
     from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS, torque_document
-    from jaxmech.constrained import Stated
+    from jaxmech.design.constrained import Stated
 
     alphas = jnp.linspace(ALPHA_START, ALPHA_END, points)
     theta0 = _flap_doc_theta_start()
@@ -325,7 +325,7 @@ def flap_msd(*, points: int = 101, starts: int | dict = 4, min_transmission: flo
     **Method.**  Stated as it reads (``flap_state``): the peak in epigraph form
     (``min t`` with ``torque_i <= t`` at every sample), the two equalities, the
     transmission limits at every sample, the box ``flap_state_bounds``; solved by
-    ``jaxmech.constrained.minimize`` (scipy SLSQP or trust-constr) with the exact Jacobian
+    ``jaxmech.design.constrained.minimize`` (scipy SLSQP or trust-constr) with the exact Jacobian
     of every constraint at every sample from one compiled forward-mode program, from each
     start in turn.
 
@@ -335,7 +335,7 @@ def flap_msd(*, points: int = 101, starts: int | dict = 4, min_transmission: flo
 
     **Returns** a ``FlapDesign``.  **Raises** ``RuntimeError`` if no start is feasible.
     """
-    from jaxmech.constrained import minimize
+    from jaxmech.design.constrained import minimize
     from jaxmech.scenes.flap_msd import DEFAULTS
 
     if isinstance(starts, int):
@@ -387,7 +387,7 @@ def _flap_measure(points, min_transmission, design):
 
 @functools.cache
 def _flap_program(points, min_transmission):
-    from jaxmech.constrained import program
+    from jaxmech.design.constrained import program
     from jaxmech.scenes.flap_msd import DEFAULTS
 
     return program(flap_state(points, min_transmission), FLAP_VARS, jnp.asarray([DEFAULTS[k] for k in FLAP_VARS]))
@@ -490,13 +490,13 @@ def _arc_sample(p, s34):
 
 @functools.cache
 def arc_state(points: int, cap: float):
-    """``arc_track_flap`` as stated, for ``jaxmech.constrained``: ``x -> Stated`` over
+    """``arc_track_flap`` as stated, for ``jaxmech.design.constrained``: ``x -> Stated`` over
     ``ARC_FREE``: the depth (m, the least ``a1 |sin theta13|`` over the stroke, a one-row
     peak: minimised) and ``le``: the raise torque over the cap at every stroke sample
     (``T_R_i / cap - 1``), the stroke within the screw (``s34_f / a3 - 1``) and
     ``a2 / a1 - 1`` (``a1 > a2``); ``ok``: every sample converged.  Each of the ``points``
     samples (nut travel ``s34_i -> s34_f``) is solved on its own, so the program is small."""
-    from jaxmech.constrained import Stated
+    from jaxmech.design.constrained import Stated
     from jaxmech.scenes.arc_track_flap import SCENE, geometry, quasi_static
 
     def state(x):
@@ -547,12 +547,12 @@ def arc_track_flap(*, points: int = 41, maxiter: int = 60, cap_factor: float = A
     peak raise torque at every stroke sample.
 
     **Method.**  Stated as it reads (``arc_state``) and solved by
-    ``jaxmech.constrained.minimize`` (SLSQP, exact Jacobians by one forward-mode program
+    ``jaxmech.design.constrained.minimize`` (SLSQP, exact Jacobians by one forward-mode program
     through the position solve) from 3 starts; every constraint met to 1e-8.
 
     **Returns** a ``FairingDesign``; check it with ``scenes.arc_track_flap.validate``.
     """
-    from jaxmech.constrained import Program, minimize
+    from jaxmech.design.constrained import Program, minimize
     from jaxmech.scenes.arc_track_flap import SCENE
 
     p0 = dict(SCENE.defaults)
@@ -604,7 +604,7 @@ def arc_track_flap(*, points: int = 41, maxiter: int = 60, cap_factor: float = A
 
 @functools.cache
 def _arc_program(points, cap):
-    from jaxmech.constrained import program
+    from jaxmech.design.constrained import program
     from jaxmech.scenes.arc_track_flap import SCENE
 
     return program(arc_state(points, cap), ARC_FREE, jnp.asarray([SCENE.defaults[k] for k in ARC_FREE]))

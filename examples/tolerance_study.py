@@ -1,6 +1,6 @@
 """Tolerance study: how far manufacturing tolerances move a four-bar's coupler path and a
-flap's travel and peak torque, first order (``jaxmech.tolerance.analyse``) against batched
-Monte Carlo (``jaxmech.tolerance.monte_carlo``).
+flap's travel and peak torque, first order (``jaxmech.design.tolerance.analyse``) against batched
+Monte Carlo (``jaxmech.design.tolerance.monte_carlo``).
 
 - ``fourbar_figures``: for ``path_synthesis.GENERAL_FOURBAR`` at the crank angle
   ``FOURBAR_ALPHA``: the coupler point's position (``x``, ``y``, m: its path deviation
@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxmech.tolerance import analyse, monte_carlo
+from jaxmech.design.tolerance import analyse, monte_carlo
 
 from .path_synthesis import PARAMS, pose
 

@@ -1,4 +1,4 @@
-"""jaxmech.constrained on a minimax problem whose answer is known in closed form."""
+"""jaxmech.design.constrained on a minimax problem whose answer is known in closed form."""
 
 import jax
 
@@ -8,7 +8,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxmech.constrained import Stated, minimize  # noqa: E402
+from jaxmech.design.constrained import Stated, minimize  # noqa: E402
 
 
 def _state(x):
@@ -37,3 +37,13 @@ def test_minimize_checks_its_arguments():
         minimize(_state, {"x": [0.5], "y": [0.0]}, {"x": (0.0, 1.0)})
     with pytest.raises(ValueError, match="method"):
         minimize(_state, {"x": [0.5], "y": [0.0]}, {"x": (0.0, 1.0), "y": (0.0, 1.0)}, method="BFGS")
+
+
+def test_old_import_path_warns_and_gives_the_same_functions():
+    import importlib
+    import sys
+
+    sys.modules.pop("jaxmech.constrained", None)
+    with pytest.warns(DeprecationWarning, match="jaxmech.design.constrained"):
+        old = importlib.import_module("jaxmech.constrained")
+    assert old.minimize is minimize and old.Stated is Stated

@@ -11,7 +11,7 @@ import pytest  # noqa: E402
 
 from examples import path_synthesis as ps  # noqa: E402
 from examples import tolerance_study as ts  # noqa: E402
-from jaxmech.tolerance import analyse  # noqa: E402
+from jaxmech.design.tolerance import analyse  # noqa: E402
 
 MC_SAMPLES = 10_000
 # The sample standard deviation of M normal draws has a relative standard error

@@ -1,4 +1,4 @@
-"""jaxmech.tolerance on figures whose spread is known in closed form."""
+"""jaxmech.design.tolerance on figures whose spread is known in closed form."""
 
 import jax
 
@@ -8,7 +8,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxmech.tolerance import analyse, monte_carlo  # noqa: E402
+from jaxmech.design.tolerance import analyse, monte_carlo  # noqa: E402
 
 
 def _figures(p):
@@ -32,3 +32,13 @@ def test_linear_spread_worst_case_and_monte_carlo():
     assert mc["bad"]["failed"][2] == 20_000 and mc["bad"]["failed"][0] == 0
     with pytest.raises(ValueError, match=">= 0"):
         analyse(_figures, designs, {"x": -1.0})
+
+
+def test_old_import_path_warns_and_gives_the_same_functions():
+    import importlib
+    import sys
+
+    sys.modules.pop("jaxmech.tolerance", None)
+    with pytest.warns(DeprecationWarning, match="jaxmech.design.tolerance"):
+        old = importlib.import_module("jaxmech.tolerance")
+    assert old.analyse is analyse and old.monte_carlo is monte_carlo

@@ -1,4 +1,5 @@
-"""Design studies on whole batches: sensitivities, peaks over a stroke, multi-start fits.
+"""Design studies on whole batches: sensitivities, peaks over a stroke, multi-start fits,
+constrained design, tolerance analysis and path synthesis (the design layer, in one place).
 
 A *figure of merit* is any scalar function of one design's parameters, ``f(p)``, for
 example the peak motor torque or the final flap angle.  Its derivatives come from the
@@ -12,6 +13,12 @@ tolerance and costs about one extra stroke evaluation whatever the number of par
 - ``peak`` takes a maximum over the stroke in a way whose gradient is right.
 - ``fit`` runs optax from a batch of starting designs at once (multi-start) and says which
   start won and why each of the others stopped.
+- ``constrained`` (``minimize``, ``program``, ``Stated``): a design problem as an engineer
+  states it (least peak over the stroke, equalities, limits, a box), solved by scipy's SLSQP
+  fed one compiled program of exact Jacobians; ``second_order``: the same statement by an
+  interior-point method with exact Hessians.
+- ``tolerance`` (``analyse``, ``monte_carlo``): the spread of figures from manufacturing
+  tolerances, first order (forward-mode Jacobians, ``batch_jacobian``) and by sampling.
 - ``synthesize_path`` finds a four-bar whose coupler curve passes through (or nearest to)
   target points, closed, open or partial, with or without prescribed crank angles;
   ``path_error`` is its error measure (distance from each target to the feasible curve).

@@ -1,6 +1,6 @@
 """Constrained design with exact second derivatives, every start at once.
 
-The problem is stated as in ``jaxmech.constrained`` (``state(x) -> Stated``: a peak to make
+The problem is stated as in ``jaxmech.design.constrained`` (``state(x) -> Stated``: a peak to make
 least over the stroke samples, equalities, inequalities, assemblability), in epigraph form
 ``min t  s.t.  peak_i(x) / peak_scale <= t``, in the box's scaled variables.  Its Lagrangian's
 exact Hessian (every constraint at every stroke sample, through the implicit rule of the
@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .constrained import starts_in_box
 from .interior import IP_MESSAGES, IPOptions, IPStatus, interior_point, second_order
 
 __all__ = ["SecondOrderResult", "epigraph_problem", "minimize_second_order", "local_optima"]
@@ -161,19 +162,7 @@ def minimize_second_order(state: Callable, x0: Mapping, bounds: Mapping[str, tup
     **Returns** a ``SecondOrderResult``: every start's design, peak, violation, status and
     KKT residual, the winner, and the local optima with how many starts reached each.
     """
-    from ..constrained import Stated  # noqa: F401 - the statement's type, documented there
-
-    if not isinstance(x0, Mapping) or not x0:
-        raise ValueError("minimize_second_order: x0 must be a non-empty mapping {name: (S,) starts}")
-    names = tuple(x0)
-    missing = [k for k in names if k not in bounds]
-    if missing:
-        raise ValueError(f"minimize_second_order: bounds missing for {missing}; give (low, high) for every parameter")
-    lo = np.array([float(bounds[k][0]) for k in names])
-    hi = np.array([float(bounds[k][1]) for k in names])
-    if not np.all(np.isfinite(lo) & np.isfinite(hi) & (lo < hi)):
-        raise ValueError(f"minimize_second_order: every parameter needs finite bounds low < high, got {dict(bounds)}")
-    starts = np.stack([np.atleast_1d(np.asarray(x0[k], float)) for k in names], axis=1)
+    names, starts, lo, hi = starts_in_box(x0, bounds, "minimize_second_order")
     width = hi - lo
     z0 = np.clip((starts - lo) / width, 0.0, 1.0)
     xt0 = np.concatenate([z0, np.zeros((z0.shape[0], 1))], axis=1)

@@ -14,7 +14,7 @@ import numpy as np
 from ..xla import jit
 from .figures import as_batch, figure_value
 
-__all__ = ["Sensitivities", "sensitivities"]
+__all__ = ["Sensitivities", "batch_jacobian", "sensitivities"]
 
 
 # =========================================================================== sensitivities
@@ -68,14 +68,44 @@ class Sensitivities:
 
 
 @functools.partial(jit, static_argnums=(0, 1))
-def _value_and_grad_batch(figure, wrt, p_wrt, p_rest):
-    def masked(pw, pr):
-        value, ok = figure_value(figure({**pr, **pw}))
-        # Differentiate the masked value: a failed design contributes a zero cotangent.
-        return jnp.where(ok, value, 0.0), (value, ok)
+def batch_jacobian(fn: Callable, forward: bool, p_wrt, p_rest):
+    """Values and exact first derivatives of ``fn`` over a batch of designs, one compiled call.
 
-    (_, (value, ok)), grad = jax.vmap(jax.value_and_grad(masked, has_aux=True))(p_wrt, p_rest)
-    return value, ok, grad
+    `fn` maps one design ``{name: scalar}`` to ``(values, aux)``: `values` any pytree of
+    float scalars (figure units), `aux` anything carried along undifferentiated.  `p_wrt`
+    ``{name: (D,)}`` are differentiated, `p_rest` ``{name: (D,)}`` held.  `forward`:
+    ``jax.jacfwd`` (one tangent per name in `p_wrt`: cheap for few parameters and many
+    values, ``tolerance.analyse``) or ``jax.jacrev`` (one cotangent per value: a scalar
+    figure's gradient, ``sensitivities``).  The positions' derivatives come from the implicit
+    function theorem in either mode.
+
+    **Returns** ``(values, aux, jacobian)`` with ``(D,)`` in front of every leaf;
+    ``jacobian`` has `values`' structure with ``{name: d value / d name}`` at each leaf
+    (figure units per parameter unit).
+    """
+
+    def one(pw, pr):
+        def split(w):
+            values, aux = fn({**pr, **w})
+            return values, (values, aux)
+
+        jac, (values, aux) = (jax.jacfwd if forward else jax.jacrev)(split, has_aux=True)(pw)
+        return values, aux, jac
+
+    return jax.vmap(one)(p_wrt, p_rest)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Masked:
+    """A figure as ``batch_jacobian`` takes it: ``p -> (masked value, (value, ok))``;
+    hashable as its figure is (one compiled program per figure)."""
+
+    figure: Callable
+
+    def __call__(self, p):
+        # Differentiate the masked value: a failed design contributes a zero cotangent.
+        value, ok = figure_value(self.figure(p))
+        return jnp.where(ok, value, 0.0), (value, ok)
 
 
 def sensitivities(figure: Callable, params: Mapping, *, wrt: Sequence[str] | None = None) -> Sensitivities:
@@ -102,7 +132,7 @@ def sensitivities(figure: Callable, params: Mapping, *, wrt: Sequence[str] | Non
         raise ValueError(f"sensitivities: wrt names {unknown} are not in params {list(batch)}")
     p_wrt = {k: batch[k] for k in wrt}
     p_rest = {k: v for k, v in batch.items() if k not in wrt}
-    value, ok, grad = _value_and_grad_batch(figure, wrt, p_wrt, p_rest)
+    _, (value, ok), grad = batch_jacobian(_Masked(figure), False, p_wrt, p_rest)
     ok = np.asarray(ok)
     value = np.where(ok, np.asarray(value), np.nan)
     grad = {k: np.where(ok, np.asarray(grad[k]), np.nan) for k in wrt}
