@@ -43,7 +43,8 @@ import jax.numpy as jnp
 
 from ..linalg import parts, solve_small, where
 
-__all__ = ["IPStatus", "IPOptions", "IPState", "second_order", "interior_point", "cholesky_small", "kkt_error"]
+__all__ = ["IPStatus", "IPOptions", "IPState", "Evaluation", "NewtonStep", "IPLoop", "Accepted", "Direction", "second_order",
+           "initial_loop", "accept_trial", "newton_direction", "next_loop", "interior_point", "cholesky_small", "kkt_error"]
 
 
 class IPStatus(enum.IntEnum):
@@ -83,6 +84,31 @@ class IPOptions:
     s_max: float = 100.0
 
 
+class Evaluation(NamedTuple):
+    """The problem and its derivatives at one point (``second_order``'s ``evaluate``): the
+    objective `f`, the constraints `c` (``h`` then ``g``), ``grad f``, the constraints'
+    Jacobian `jac` ``(p + m, n)``, the Hessian `hess` of the Lagrangian, and `ok` (finite
+    and evaluable).  Unpacks like the 6-tuple it replaces."""
+
+    f: jax.Array
+    c: jax.Array
+    grad: jax.Array
+    jac: jax.Array
+    hess: jax.Array
+    ok: jax.Array
+
+
+class NewtonStep(NamedTuple):
+    """One step of the condensed Newton system (``_newton_step``): primal `dx`, equality
+    and inequality multipliers `dy`, `dz`, slacks `ds`, and `ok` (factorised, finite)."""
+
+    dx: jax.Array
+    dy: jax.Array
+    dz: jax.Array
+    ds: jax.Array
+    ok: jax.Array
+
+
 class IPState(NamedTuple):
     """Loop state of one start."""
 
@@ -105,7 +131,7 @@ class IPState(NamedTuple):
 
 
 def second_order(problem: Callable, p: int):
-    """``evaluate(x, y, z) -> (f, c, grad f, J_c, W, ok)`` from ``problem(x) -> (f, h, g, ok)``
+    """``evaluate(x, y, z) -> Evaluation(f, c, grad f, J_c, W, ok)`` from ``problem(x) -> (f, h, g, ok)``
     (``h (p,)``, ``g (m,)``): values, the constraints' Jacobian and the Hessian ``W`` of the
     Lagrangian ``f + y.h + z.g``, by one linearisation of ``x -> (values, grad L)`` (forward
     over reverse mode) with the ``n`` unit tangents at once."""
@@ -127,7 +153,7 @@ def second_order(problem: Callable, p: int):
         jac = tan_v.T  # (1 + p + m, n)
         hess = 0.5 * (tan_g + tan_g.T)
         ok = ok & jnp.all(jnp.isfinite(v)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
-        return v[0], v[1:], jac[0], jac[1:], hess, ok
+        return Evaluation(v[0], v[1:], jac[0], jac[1:], hess, ok)
 
     return evaluate, values
 
@@ -189,8 +215,8 @@ def kkt_error(grad, jac, y, z, s, c, p, mu, s_max):
     return jnp.maximum(jnp.maximum(jnp.max(jnp.abs(r_d)) / s_d, primal), comp)
 
 
-def _newton_step(st: IPState, p: int):
-    """``(dx, dy, dz, ds, ok)`` of the condensed Newton system at ``st`` (module docstring)."""
+def _newton_step(st: IPState, p: int) -> NewtonStep:
+    """The ``NewtonStep`` of the condensed Newton system at ``st`` (module docstring)."""
     n = st.x.shape[0]
     jh, jg = st.jac[:p], st.jac[p:]
     h, g = st.c[:p], st.c[p:]
@@ -234,7 +260,7 @@ def _newton_step(st: IPState, p: int):
     dz = sigma * (jg @ dx + g) + st.mu / st.s
     ds = -(g + st.s) - jg @ dx
     ok = chol_ok & jnp.all(jnp.isfinite(dx)) & jnp.all(jnp.isfinite(dy)) & jnp.all(jnp.isfinite(dz))
-    return dx, dy, dz, ds, ok
+    return NewtonStep(dx, dy, dz, ds, ok)
 
 
 def _to_boundary(v, dv, tau):
@@ -247,6 +273,154 @@ def _merit(f, c, s, mu, nu, p):
     return f - mu * jnp.sum(jnp.log(s)) + nu * (jnp.sum(jnp.abs(c[:p])) + jnp.sum(jnp.abs(c[p:] + s)))
 
 
+class IPLoop(NamedTuple):
+    """State of ``interior_point``'s one loop: the accepted iterate and the point to evaluate
+    next (the start, moved or prepared, or a line-search trial along the last step)."""
+
+    st: IPState
+    phase: jax.Array  # 0: finding an evaluable start, 1: prepared start, 2: iterating
+    pulled: jax.Array  # times the start was moved halfway to `ref`
+    xt: jax.Array  # the point evaluated next
+    yt: jax.Array
+    zt: jax.Array
+    st_s: jax.Array  # trial slacks
+    dx: jax.Array  # the last Newton step's primal and slack parts
+    ds: jax.Array
+    phi0: jax.Array  # merit at the accepted point, and its directional derivative
+    dphi: jax.Array
+    backtracks: jax.Array  # halvings of the current line search
+
+
+class Accepted(NamedTuple):
+    """What one evaluation decided (``accept_trial``): the iterate after it (`state`), and
+    the flags the rest of the iteration needs."""
+
+    state: IPState
+    ok: jax.Array  # the evaluation is finite and the design assembles
+    trial: jax.Array  # the point was a line-search trial (phase 2)
+    in_start: jax.Array  # the point was a start (phase 0 or 1)
+    ready: jax.Array  # the start is evaluable and prepared: iterations begin from it
+    accept: jax.Array  # the point becomes the iterate (a good trial, or a ready start)
+    bad_start: jax.Array  # a start that cannot be evaluated
+    give_up: jax.Array  # ... and it was moved towards `ref` 20 times already
+    x_prep: jax.Array  # the start after ``prepare``
+    error: jax.Array  # scaled KKT residual at the point (mu = 0)
+
+
+class Direction(NamedTuple):
+    """The Newton step from the accepted iterate (``newton_direction``): the step, its
+    fraction-to-boundary lengths (primal `a_p`, dual `a_d`), the merit penalty `nu`, the
+    merit `phi0` and its directional derivative `dphi`."""
+
+    step: NewtonStep
+    a_p: jax.Array
+    a_d: jax.Array
+    nu: jax.Array
+    phi0: jax.Array
+    dphi: jax.Array
+
+
+def initial_loop(x0, p: int, m: int, o: IPOptions) -> IPLoop:
+    """The loop state before the first evaluation: `x0` to be evaluated as the start, unit
+    slacks and inequality multipliers, zero equality multipliers, ``mu = o.mu0``."""
+    dtype = x0.dtype
+    n = x0.shape[0]
+    zeros_m = jnp.zeros((m,), dtype)
+    nan = jnp.asarray(jnp.nan, dtype)
+    init_state = IPState(k=jnp.zeros((), jnp.int32), x=x0, s=jnp.ones((m,), dtype), y=jnp.zeros((p,), dtype), z=jnp.ones((m,), dtype),
+                         mu=jnp.asarray(o.mu0, dtype), nu=jnp.asarray(1.0, dtype), f=nan, c=jnp.full((p + m,), nan),
+                         grad=jnp.zeros((n,), dtype), jac=jnp.zeros((p + m, n), dtype), hess=jnp.zeros((n, n), dtype),
+                         error=jnp.asarray(jnp.inf, dtype), status=jnp.asarray(IPStatus.MAX_ITERATIONS, jnp.int32),
+                         done=jnp.asarray(False), alpha=jnp.zeros((), dtype))
+    return IPLoop(st=init_state, phase=jnp.zeros((), jnp.int32), pulled=jnp.zeros((), jnp.int32), xt=x0, yt=init_state.y,
+                  zt=init_state.z, st_s=init_state.s, dx=jnp.zeros((n,), dtype), ds=zeros_m, phi0=nan, dphi=nan,
+                  backtracks=jnp.zeros((), jnp.int32))
+
+
+def accept_trial(lp: IPLoop, ev: Evaluation, p: int, o: IPOptions, prepare) -> Accepted:
+    """Judge the point just evaluated (`ev` at ``lp.xt``): a start (phases 0 and 1) becomes
+    the iterate once it is evaluable and prepared, with slacks and multipliers set from its
+    constraints; a trial (phase 2) becomes it when it passes Armijo on the merit.  The
+    barrier parameter falls once the barrier problem is solved to ``10 mu``."""
+    st = lp.st
+    dtype = lp.xt.dtype
+    f, c, grad, jac, hess, ok = ev
+    # ---- phase 0/1: the start
+    in_start = lp.phase < 2
+    bad_start = in_start & ~ok
+    give_up = bad_start & (lp.pulled >= 20)
+    x_prep = lp.xt if prepare is None else prepare(lp.xt, c)
+    s0 = jnp.maximum(-c[p:], 1e-2 * jnp.maximum(1.0, jnp.abs(c[p:])))
+    s0 = jnp.where(jnp.isfinite(s0), s0, 1.0)
+    z0 = st.mu / s0
+    ready = in_start & ok & ((lp.phase == 1) | (prepare is None))
+    # ---- phase 2: the line search's trial
+    trial = lp.phase == 2
+    phi = _merit(f, c, lp.st_s, st.mu, st.nu, p)
+    alpha = st.alpha
+    # Armijo on the merit, with room for its round-off (near the optimum a decrease below
+    # 10 eps |phi| cannot be told from noise; IPOPT relaxes its test the same way)
+    slack = 10.0 * float(jnp.finfo(dtype).eps) * jnp.abs(lp.phi0)
+    good = trial & ok & (phi <= lp.phi0 + 1e-4 * alpha * jnp.minimum(lp.dphi, 0.0) + slack)
+    accept = good | ready
+    x_new = lp.xt
+    s_new = where(ready, s0, jnp.maximum(lp.st_s, 1e-300))
+    y_new = where(ready, jnp.zeros((p,), dtype), lp.yt)
+    z_new = where(ready, z0, jnp.clip(lp.zt, st.mu / (1e10 * s_new), 1e10 * st.mu / s_new))
+    e_mu = kkt_error(grad, jac, y_new, z_new, s_new, c, p, st.mu, o.s_max)
+    e_0 = kkt_error(grad, jac, y_new, z_new, s_new, c, p, 0.0, o.s_max)
+    mu = where(good & (e_mu <= 10.0 * st.mu), jnp.maximum(o.tol / 10.0, jnp.minimum(0.2 * st.mu, st.mu ** 1.5)), st.mu)
+    acc = IPState(k=st.k + trial.astype(jnp.int32), x=x_new, s=s_new, y=y_new, z=z_new, mu=mu, nu=st.nu, f=f, c=c, grad=grad, jac=jac,
+                  hess=hess, error=e_0, status=st.status, done=st.done, alpha=where(good, alpha, 0.0))
+    cur = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), acc, st)
+    return Accepted(state=cur, ok=ok, trial=trial, in_start=in_start, ready=ready, accept=accept, bad_start=bad_start,
+                    give_up=give_up, x_prep=x_prep, error=e_0)
+
+
+def newton_direction(cur: IPState, p: int, o: IPOptions) -> Direction:
+    """The next Newton step from the iterate `cur`, the steps to the slacks' and
+    multipliers' boundaries, and the merit's penalty, value and slope along the step."""
+    step = _newton_step(cur, p)
+    dx, dy, dz, ds, _ = step
+    tau = jnp.maximum(o.tau_min, 1.0 - cur.mu)
+    a_p = _to_boundary(cur.s, ds, tau)
+    a_d = _to_boundary(cur.z, dz, tau)
+    nu = 1.0 + 1.1 * jnp.max(jnp.abs(jnp.concatenate([cur.y + dy, cur.z + dz])), initial=0.0)
+    phi0 = _merit(cur.f, cur.c, cur.s, cur.mu, nu, p)
+    dphi = cur.grad @ dx - cur.mu * jnp.sum(ds / cur.s) - nu * (jnp.sum(jnp.abs(cur.c[:p])) + jnp.sum(jnp.abs(cur.c[p:] + cur.s)))
+    return Direction(step=step, a_p=a_p, a_d=a_d, nu=nu, phi0=phi0, dphi=dphi)
+
+
+def next_loop(lp: IPLoop, a: Accepted, d: Direction, ref, o: IPOptions) -> IPLoop:
+    """The start's status after this iteration (converged, given up, a non-finite step, a
+    line search out of halvings) and the point to evaluate next: the start moved halfway to
+    `ref` or prepared, the first trial of a new step, or the last trial's step halved."""
+    cur = a.state
+    dx, dy, dz, ds, ok_step = d.step
+    converged = a.accept & a.ok & (a.error <= o.tol)
+    # a rejected trial: halve the step
+    backtracks = where(a.accept, 0, lp.backtracks + a.trial.astype(jnp.int32))
+    small = a.trial & ~a.accept & (backtracks >= o.max_backtrack)
+    half = 0.5 * lp.st.alpha
+    status = where(converged, IPStatus.CONVERGED,
+                   where(a.give_up, IPStatus.START_NOT_EVALUATED,
+                         where(a.accept & ~ok_step, IPStatus.NONFINITE, where(small, IPStatus.SMALL_STEP, IPStatus.MAX_ITERATIONS))))
+    done = converged | a.give_up | (a.accept & ~ok_step) | small
+    cur = cur._replace(nu=where(a.accept, d.nu, cur.nu), status=status.astype(jnp.int32), done=done, alpha=where(a.accept, d.a_p, half))
+    step_alpha = where(a.accept, d.a_p, half)
+    # where to evaluate next
+    phase = where(a.bad_start, 0, where(a.in_start & a.ok & ~a.ready, 1, 2)).astype(jnp.int32)
+    xt_start = where(a.bad_start, 0.5 * (lp.xt + ref), a.x_prep)
+    d_x = where(a.accept, dx, lp.dx)
+    d_s = where(a.accept, ds, lp.ds)
+    xt = where(phase < 2, xt_start, cur.x + step_alpha * d_x)
+    st_s = cur.s + step_alpha * d_s
+    yt = where(a.accept, cur.y + d.a_d * dy, lp.yt)
+    zt = where(a.accept, jnp.maximum(cur.z + d.a_d * dz, 1e-300), lp.zt)
+    return IPLoop(st=cur, phase=phase, pulled=lp.pulled + a.bad_start.astype(jnp.int32), xt=xt, yt=yt, zt=zt, st_s=st_s,
+                  dx=d_x, ds=d_s, phi0=where(a.accept, d.phi0, lp.phi0), dphi=where(a.accept, d.dphi, lp.dphi), backtracks=backtracks)
+
+
 def interior_point(evaluate, x0, p: int, m: int, options: IPOptions = IPOptions(), ref=None, prepare=None):
     """Solve one start (vmap it for a batch).  `evaluate` as ``second_order`` gives it; `x0`
     ``(n,)``; `p`, `m` the numbers of equalities and inequalities (``c`` = h then g).
@@ -255,104 +429,20 @@ def interior_point(evaluate, x0, p: int, m: int, options: IPOptions = IPOptions(
     program holds one copy of the problem and its derivatives): the start (moved halfway to
     `ref` while it cannot be evaluated, at most 20 times; then ``prepare(x, c) -> x`` once, e.g.
     an epigraph variable set above the peaks, and evaluated again), then each line-search
-    trial, whose derivatives serve the next Newton step when it is accepted.
+    trial, whose derivatives serve the next Newton step when it is accepted.  One iteration
+    is three stages: ``accept_trial``, ``newton_direction``, ``next_loop``.
 
     Returns ``(IPState, pulled)``: the final state (``status``: ``IPStatus``) and how many
     times the start was moved towards `ref`."""
     o = options
-    dtype = x0.dtype
-    n = x0.shape[0]
     ref = x0 if ref is None else ref
-    zeros_m = jnp.zeros((m,), dtype)
 
-    class Loop(NamedTuple):
-        st: IPState
-        phase: jax.Array  # 0: finding an evaluable start, 1: prepared start, 2: iterating
-        pulled: jax.Array
-        xt: jax.Array  # the point evaluated next
-        yt: jax.Array
-        zt: jax.Array
-        st_s: jax.Array  # trial slacks
-        dx: jax.Array
-        ds: jax.Array
-        phi0: jax.Array
-        dphi: jax.Array
-        backtracks: jax.Array
-
-    nan = jnp.asarray(jnp.nan, dtype)
-    init_state = IPState(k=jnp.zeros((), jnp.int32), x=x0, s=jnp.ones((m,), dtype), y=jnp.zeros((p,), dtype), z=jnp.ones((m,), dtype),
-                         mu=jnp.asarray(o.mu0, dtype), nu=jnp.asarray(1.0, dtype), f=nan, c=jnp.full((p + m,), nan),
-                         grad=jnp.zeros((n,), dtype), jac=jnp.zeros((p + m, n), dtype), hess=jnp.zeros((n, n), dtype),
-                         error=jnp.asarray(jnp.inf, dtype), status=jnp.asarray(IPStatus.MAX_ITERATIONS, jnp.int32),
-                         done=jnp.asarray(False), alpha=jnp.zeros((), dtype))
-    start = Loop(st=init_state, phase=jnp.zeros((), jnp.int32), pulled=jnp.zeros((), jnp.int32), xt=x0, yt=init_state.y,
-                 zt=init_state.z, st_s=init_state.s, dx=jnp.zeros((n,), dtype), ds=zeros_m, phi0=nan, dphi=nan,
-                 backtracks=jnp.zeros((), jnp.int32))
-
-    def cond(lp: Loop):
+    def cond(lp: IPLoop):
         return ~lp.st.done & (lp.st.k < o.max_iter)
 
-    def body(lp: Loop) -> Loop:
-        st = lp.st
-        f, c, grad, jac, hess, ok = evaluate(lp.xt, lp.yt, lp.zt)
-        # ---- phase 0/1: the start
-        in_start = lp.phase < 2
-        bad_start = in_start & ~ok
-        give_up = bad_start & (lp.pulled >= 20)
-        x_prep = lp.xt if prepare is None else prepare(lp.xt, c)
-        s0 = jnp.maximum(-c[p:], 1e-2 * jnp.maximum(1.0, jnp.abs(c[p:])))
-        s0 = jnp.where(jnp.isfinite(s0), s0, 1.0)
-        z0 = st.mu / s0
-        ready = in_start & ok & ((lp.phase == 1) | (prepare is None))
-        # ---- phase 2: the line search's trial
-        trial = lp.phase == 2
-        phi = _merit(f, c, lp.st_s, st.mu, st.nu, p)
-        alpha = st.alpha
-        # Armijo on the merit, with room for its round-off (near the optimum a decrease below
-        # 10 eps |phi| cannot be told from noise; IPOPT relaxes its test the same way)
-        slack = 10.0 * float(jnp.finfo(dtype).eps) * jnp.abs(lp.phi0)
-        good = trial & ok & (phi <= lp.phi0 + 1e-4 * alpha * jnp.minimum(lp.dphi, 0.0) + slack)
-        accept = good | ready
-        x_new = lp.xt
-        s_new = where(ready, s0, jnp.maximum(lp.st_s, 1e-300))
-        y_new = where(ready, jnp.zeros((p,), dtype), lp.yt)
-        z_new = where(ready, z0, jnp.clip(lp.zt, st.mu / (1e10 * s_new), 1e10 * st.mu / s_new))
-        e_mu = kkt_error(grad, jac, y_new, z_new, s_new, c, p, st.mu, o.s_max)
-        e_0 = kkt_error(grad, jac, y_new, z_new, s_new, c, p, 0.0, o.s_max)
-        mu = where(good & (e_mu <= 10.0 * st.mu), jnp.maximum(o.tol / 10.0, jnp.minimum(0.2 * st.mu, st.mu ** 1.5)), st.mu)
-        acc = IPState(k=st.k + trial.astype(jnp.int32), x=x_new, s=s_new, y=y_new, z=z_new, mu=mu, nu=st.nu, f=f, c=c, grad=grad, jac=jac,
-                      hess=hess, error=e_0, status=st.status, done=st.done, alpha=where(good, alpha, 0.0))
-        cur = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), acc, st)
-        # the next Newton step, from the accepted point
-        dx, dy, dz, ds, ok_step = _newton_step(cur, p)
-        tau = jnp.maximum(o.tau_min, 1.0 - cur.mu)
-        a_p = _to_boundary(cur.s, ds, tau)
-        a_d = _to_boundary(cur.z, dz, tau)
-        nu = 1.0 + 1.1 * jnp.max(jnp.abs(jnp.concatenate([cur.y + dy, cur.z + dz])), initial=0.0)
-        phi0 = _merit(cur.f, cur.c, cur.s, cur.mu, nu, p)
-        dphi = cur.grad @ dx - cur.mu * jnp.sum(ds / cur.s) - nu * (jnp.sum(jnp.abs(cur.c[:p])) + jnp.sum(jnp.abs(cur.c[p:] + cur.s)))
-        converged = accept & ok & (e_0 <= o.tol)
-        # a rejected trial: halve the step
-        backtracks = where(accept, 0, lp.backtracks + trial.astype(jnp.int32))
-        small = trial & ~accept & (backtracks >= o.max_backtrack)
-        half = 0.5 * alpha
-        status = where(converged, IPStatus.CONVERGED,
-                       where(give_up, IPStatus.START_NOT_EVALUATED,
-                             where(accept & ~ok_step, IPStatus.NONFINITE, where(small, IPStatus.SMALL_STEP, IPStatus.MAX_ITERATIONS))))
-        done = converged | give_up | (accept & ~ok_step) | small
-        cur = cur._replace(nu=where(accept, nu, cur.nu), status=status.astype(jnp.int32), done=done, alpha=where(accept, a_p, half))
-        step_alpha = where(accept, a_p, half)
-        # where to evaluate next
-        phase = where(bad_start, 0, where(in_start & ok & ~ready, 1, 2)).astype(jnp.int32)
-        xt_start = where(bad_start, 0.5 * (lp.xt + ref), x_prep)
-        d_x = where(accept, dx, lp.dx)
-        d_s = where(accept, ds, lp.ds)
-        xt = where(phase < 2, xt_start, cur.x + step_alpha * d_x)
-        st_s = cur.s + step_alpha * d_s
-        yt = where(accept, cur.y + a_d * dy, lp.yt)
-        zt = where(accept, jnp.maximum(cur.z + a_d * dz, 1e-300), lp.zt)
-        return Loop(st=cur, phase=phase, pulled=lp.pulled + bad_start.astype(jnp.int32), xt=xt, yt=yt, zt=zt, st_s=st_s,
-                    dx=d_x, ds=d_s, phi0=where(accept, phi0, lp.phi0), dphi=where(accept, dphi, lp.dphi), backtracks=backtracks)
+    def body(lp: IPLoop) -> IPLoop:
+        a = accept_trial(lp, Evaluation(*evaluate(lp.xt, lp.yt, lp.zt)), p, o, prepare)
+        return next_loop(lp, a, newton_direction(a.state, p, o), ref, o)
 
-    out = jax.lax.while_loop(cond, body, start)
+    out = jax.lax.while_loop(cond, body, initial_loop(x0, p, m, o))
     return out.st, out.pulled

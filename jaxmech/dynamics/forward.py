@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -31,7 +32,8 @@ from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
 from ..xla import jit
 
-__all__ = ["METHODS", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "integrate", "forward_dynamics"]
+__all__ = ["METHODS", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "Run", "integrate",
+           "forward_dynamics"]
 
 
 def _tableau(name):
@@ -161,97 +163,147 @@ def stage_residual(integ: Integrator, A, c, Z, args):
     return Z - h * (jnp.asarray(A, Z.dtype) @ F)
 
 
-def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi):
+class Run(NamedTuple):
+    """What ``integrate`` returns (unpacks like the 5-tuple it replaces): the states `ys`
+    ``(steps+1, n)`` and solved coordinates `qs` ``(steps+1, m)`` (NaN after a stop), the
+    run's ``DynStatus`` `status`, the time `t_stop` (s) of its last valid state, and the
+    simplified-Newton iterations `newton` ``(steps,)`` of each step."""
+
+    ys: jax.Array
+    qs: jax.Array
+    status: jax.Array
+    t_stop: jax.Array
+    newton: jax.Array
+
+
+class StepContext(NamedTuple):
+    """What every step of one ``integrate`` run shares: the settings, the tableau (numpy
+    ``A_np, c_np`` for the stage residual, arrays ``A, c, d``), the parameters `p` (and
+    `ps`, the same without gradient), the start time `t0` and step `h` (s), the stroke
+    bounds `lo`, `hi`, the stage Newton's tolerance and the finite-difference step."""
+
+    integ: Integrator
+    A_np: np.ndarray
+    c_np: np.ndarray
+    A: jax.Array
+    c: jax.Array
+    d: jax.Array
+    p: Mapping
+    ps: Mapping
+    t0: jax.Array
+    h: jax.Array
+    lo: jax.Array
+    hi: jax.Array
+    newton_tol: float
+    fd_step: float
+
+
+def stage_newton(cx: StepContext, t, ys, qg):
+    """The stage equations ``Z = h A F(ys + Z)`` of the step from ``(t, ys)`` solved by
+    simplified Newton from ``Z = 0``: ``(Z, iterations, err)``, ``err`` the last scaled increment,
+    -1 where a stage could not be evaluated.
+
+    One iteration matrix ``I - h A (x) J(ys)`` per step.  J only steers the iteration (the
+    converged stages do not depend on it), so a forward difference is enough, and it avoids
+    third derivatives of the implicit positions.  The difference points ride in the same
+    batched right-hand-side call as the stages: one copy of the right-hand side in the
+    compiled step (compile time is dominated by it), at the price of n + 1 extra evaluations
+    per iteration."""
+    A, c, h = cx.A, cx.c, cx.h
+    s, n = A.shape[0], ys.shape[0]
+    scale = 1.0 + jnp.abs(ys)
+    dy = cx.fd_step * scale
+    ts = jnp.concatenate([t + c * h, jnp.full((n + 1,), t)])
+    y_fd = jnp.concatenate([ys[None], ys + jnp.diag(dy)])
+    eye = jnp.eye(s * n, dtype=ys.dtype)
+    Z0 = jnp.zeros((s, n), ys.dtype)
+
+    def cond_fn(st):
+        it, _, _, err = st
+        return (it < cx.integ.newton_max) & (err > cx.newton_tol)
+
+    def body(st):
+        it, Z, Minv, _ = st
+        fb = jax.vmap(lambda ti, yi: rhs(cx.integ, cx.ps, ti, yi, qg))(ts, jnp.concatenate([ys + Z, y_fd]))
+        J0 = jnp.where(it == 0, ((fb[s + 1 :] - fb[s]) / dy[:, None]).T, 0.0)
+        J0 = jnp.where(jnp.isfinite(J0), J0, 0.0)
+        Minv = jnp.where(it == 0, jnp.linalg.inv(eye - h * jnp.kron(A, J0)), Minv)
+        dZ = -(Minv @ (Z - h * (A @ fb[:s])).reshape(-1)).reshape(Z.shape)
+        err = jnp.max(jnp.abs(dZ) / scale)
+        finite = jnp.isfinite(err)
+        # err = -1 marks a non-finite stage (the loop could not be closed): stop.
+        return it + 1, jnp.where(finite, Z + dZ, Z), Minv, jnp.where(finite, err, -1.0)
+
+    it, Z, _, err = jax.lax.while_loop(cond_fn, body, (0, Z0, eye, jnp.asarray(jnp.inf, Z0.dtype)))
+    return Z, it, err
+
+
+def step_status(cx: StepContext, err, pos_ok, y_new):
+    """The ``DynStatus`` of one step: the loop not closed, the stages not converged (to
+    ``1e3`` times the tolerance), a non-finite state, an input out of the stroke, or OK."""
+    dof = cx.integ.model.mechanism.dof
+    conv = (err >= 0) & (err <= 1e3 * cx.newton_tol)
+    finite = jnp.all(jnp.isfinite(y_new))
+    out_of_stroke = jnp.any(y_new[:dof] < cx.lo) | jnp.any(y_new[:dof] > cx.hi)
+    return jnp.where(
+        (err < 0) | ~pos_ok, DynStatus.POSITION,
+        jnp.where(~conv, DynStatus.NOT_CONVERGED,
+                  jnp.where(~finite, DynStatus.NONFINITE,
+                            jnp.where(out_of_stroke, DynStatus.STROKE_END, DynStatus.OK))))
+
+
+def integration_step(cx: StepContext, carry, k):
+    """Step `k` of the scan: ``carry = (y, q, status, t_stop)`` advanced by one implicit
+    Runge-Kutta step where the run is still OK; the step's state and coordinates (NaN when
+    not accepted) and its Newton iterations as the scan's output."""
+    integ = cx.integ
+    dof = integ.model.mechanism.dof
+    y, q, status, t_stop = carry
+    t = cx.t0 + k * cx.h
+    stop = jax.lax.stop_gradient
+    qg = stop(q)
+    ys = stop(y)
+    Z_star, it, err = stage_newton(cx, t, ys, qg)
+    # The converged stages attached to their arguments by the implicit rule on
+    # G(Z*, args) = 0: dZ = -G_Z^{-1} G_args dargs (a custom JVP rather than
+    # jax.lax.custom_root, which traces the linearization of G, third derivatives of the
+    # positions, on every call, differentiated or not).
+    G = functools.partial(stage_residual, integ, cx.A_np, cx.c_np)
+    Z_star = stop(Z_star)
+    Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, cx.p, t, cx.h), checkpoint=True)
+    y_new = y + cx.d @ Z
+    q_new, pos_ok = close_loop(integ.model.mechanism, y_new[:dof], cx.p, qg, integ.close_iters, integ.options)
+    new_status = step_status(cx, err, pos_ok, y_new)
+    running = status == DynStatus.OK
+    accept = running & ((new_status == DynStatus.OK) | (new_status == DynStatus.STROKE_END))
+    y_next = jnp.where(accept, y_new, y)
+    q_next = jnp.where(accept, q_new, q)
+    status_next = jnp.where(running, new_status, status).astype(jnp.int32)
+    t_stop = jnp.where(accept, t + cx.h, t_stop)
+    return (y_next, q_next, status_next, t_stop), (jnp.where(accept, y_new, jnp.nan), jnp.where(accept, q_new, jnp.nan), it)
+
+
+def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi) -> Run:
     """The forward-dynamics program of ``forward_dynamics`` (traceable; jit it with `integ`
     static): ``integ.steps`` fixed steps from ``y0 = (u, u_dot, [i])`` at ``t0`` with step
     ``h`` (s), ``q0`` the solved coordinates at ``t0``, the run stopped outside ``[lo, hi]``
-    (``(dof,)`` each).
+    (``(dof,)`` each).  Each step is ``integration_step``.
 
-    **Returns** ``(ys (steps+1, n), qs (steps+1, m), status, t_stop, newton (steps,))``.
+    **Returns** a ``Run``: ``(ys (steps+1, n), qs (steps+1, m), status, t_stop, newton (steps,))``.
     """
-    model, method, steps, iters = integ.model, integ.method, integ.steps, integ.close_iters
-    newton_max = integ.newton_max
     newton_tol = newton_tolerance(y0.dtype) if integ.newton_tol is None else integ.newton_tol
-    mech = model.mechanism
-    dof = mech.dof
-    A_np, c_np, d_np = _tableau(method)
+    A_np, c_np, d_np = _tableau(integ.method)
     A, c, d = (jnp.asarray(x, y0.dtype) for x in (A_np, c_np, d_np))
-    s, n = A.shape[0], y0.shape[0]
-    stop = jax.lax.stop_gradient
-    ps = jax.tree_util.tree_map(stop, p)
-    f = lambda t, y, qg, p_: rhs(integ, p_, t, y, qg)  # noqa: E731
-    fd_step = float(jnp.finfo(y0.dtype).eps) ** 0.5
-
-    def step(carry, k):
-        y, q, status, t_stop = carry
-        t = t0 + k * h
-        qg = stop(q)
-        ys = stop(y)
-        scale = 1.0 + jnp.abs(ys)
-        # Simplified Newton with one iteration matrix I - h A (x) J(y_n) per step.  J only
-        # steers the iteration (the converged stages do not depend on it), so a forward
-        # difference is enough, and it avoids third derivatives of the implicit positions.
-        # The difference points ride in the same batched right-hand-side call as the
-        # stages: one copy of the right-hand side in the compiled step (compile time is
-        # dominated by it), at the price of n + 1 extra evaluations per iteration.
-        dy = fd_step * scale
-        ts = jnp.concatenate([t + c * h, jnp.full((n + 1,), t)])
-        y_fd = jnp.concatenate([ys[None], ys + jnp.diag(dy)])
-        eye = jnp.eye(s * n, dtype=y.dtype)
-
-        def newton(Z0):
-            def cond_fn(st):
-                it, _, _, err = st
-                return (it < newton_max) & (err > newton_tol)
-
-            def body(st):
-                it, Z, Minv, _ = st
-                fb = jax.vmap(lambda ti, yi: f(ti, yi, qg, ps))(ts, jnp.concatenate([ys + Z, y_fd]))
-                J0 = jnp.where(it == 0, ((fb[s + 1 :] - fb[s]) / dy[:, None]).T, 0.0)
-                J0 = jnp.where(jnp.isfinite(J0), J0, 0.0)
-                Minv = jnp.where(it == 0, jnp.linalg.inv(eye - h * jnp.kron(A, J0)), Minv)
-                dZ = -(Minv @ (Z - h * (A @ fb[:s])).reshape(-1)).reshape(Z.shape)
-                err = jnp.max(jnp.abs(dZ) / scale)
-                finite = jnp.isfinite(err)
-                # err = -1 marks a non-finite stage (the loop could not be closed): stop.
-                return it + 1, jnp.where(finite, Z + dZ, Z), Minv, jnp.where(finite, err, -1.0)
-
-            it, Z, _, err = jax.lax.while_loop(cond_fn, body, (0, Z0, eye, jnp.asarray(jnp.inf, Z0.dtype)))
-            return Z, it, err
-
-        Z_star, it, err = newton(jnp.zeros((s, n), y.dtype))
-        # The converged stages attached to their arguments by the implicit rule on
-        # G(Z*, args) = 0: dZ = -G_Z^{-1} G_args dargs (a custom JVP rather than
-        # jax.lax.custom_root, which traces the linearization of G, third derivatives of the
-        # positions, on every call, differentiated or not).
-        G = functools.partial(stage_residual, integ, A_np, c_np)
-        Z_star = stop(Z_star)
-        Z = implicit_solution(G, Z_star, jnp.all(jnp.isfinite(Z_star)), (y, qg, p, t, h), checkpoint=True)
-        y_new = y + d @ Z
-        q_new, pos_ok = close_loop(mech, y_new[:dof], p, qg, iters, integ.options)
-        conv = (err >= 0) & (err <= 1e3 * newton_tol)
-        finite = jnp.all(jnp.isfinite(y_new))
-        out_of_stroke = jnp.any(y_new[:dof] < lo) | jnp.any(y_new[:dof] > hi)
-        new_status = jnp.where(
-            (err < 0) | ~pos_ok, DynStatus.POSITION,
-            jnp.where(~conv, DynStatus.NOT_CONVERGED,
-                      jnp.where(~finite, DynStatus.NONFINITE,
-                                jnp.where(out_of_stroke, DynStatus.STROKE_END, DynStatus.OK))))
-        running = status == DynStatus.OK
-        accept = running & ((new_status == DynStatus.OK) | (new_status == DynStatus.STROKE_END))
-        y_next = jnp.where(accept, y_new, y)
-        q_next = jnp.where(accept, q_new, q)
-        status_next = jnp.where(running, new_status, status).astype(jnp.int32)
-        t_stop = jnp.where(accept, t + h, t_stop)
-        return (y_next, q_next, status_next, t_stop), (jnp.where(accept, y_new, jnp.nan), jnp.where(accept, q_new, jnp.nan), it)
-
+    ps = jax.tree_util.tree_map(jax.lax.stop_gradient, p)
+    cx = StepContext(integ=integ, A_np=A_np, c_np=c_np, A=A, c=c, d=d, p=p, ps=ps, t0=t0, h=h, lo=lo, hi=hi,
+                     newton_tol=newton_tol, fd_step=float(jnp.finfo(y0.dtype).eps) ** 0.5)
     init = (y0, q0, jnp.asarray(DynStatus.OK, jnp.int32), t0)
     # The step under jax.checkpoint: without it, reverse mode differentiated again (forward
     # or reverse over reverse) lost half of second derivatives through the scan on jax
     # 0.10.2 (tests/test_hinge.py); reverse mode recomputes a step instead of storing it.
-    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(jax.checkpoint(step, prevent_cse=False), init,
-                                                         jnp.arange(steps, dtype=y0.dtype))
-    return jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its
+    (_, _, status, t_stop), (ys, qs, its) = jax.lax.scan(jax.checkpoint(functools.partial(integration_step, cx), prevent_cse=False),
+                                                         init, jnp.arange(integ.steps, dtype=y0.dtype))
+    return Run(jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its)
 
 
 _integrate_jit = jit(integrate, static_argnums=0)
@@ -285,6 +337,50 @@ def _checked(mech, u0, u_dot0, guess, h, t0, stroke):
             if np.shape(b) not in ((), (dof,)):
                 raise ValueError(f"{mech.name}: stroke {name} must be a number or have shape ({dof},), got shape {np.shape(b)}")
     return u0, ud0, guess
+
+
+def run_actuators(mech, motor, voltage, motor_input, actuators) -> list:
+    """The run's stateful actuators, ``[(input index, actuator), ...]``, the motor first (on
+    `motor_input`, default the first input; `voltage`, when given, replacing its own), then
+    `actuators` by input name.  ``ValueError`` for an unknown input or an object that is not
+    a ``StatefulActuator``."""
+    acts = []
+    if motor is not None:
+        if motor_input is not None and motor_input not in mech.inputs:
+            raise ValueError(f"motor_input {motor_input!r} is not an input; inputs are {list(mech.inputs)}")
+        k_in = 0 if motor_input is None else mech.inputs.index(motor_input)
+        acts.append((k_in, motor if voltage is None else dataclasses.replace(motor, voltage=voltage)))
+    for name, act in (actuators or {}).items():
+        if name not in mech.inputs:
+            raise ValueError(f"actuators: {name!r} is not an input; inputs are {list(mech.inputs)}")
+        if not all(hasattr(act, a) for a in ("n_states", "initial_state", "force", "rate")):
+            raise ValueError(f"actuators[{name!r}]: {type(act).__name__} is not a StatefulActuator "
+                             f"(n_states, initial_state, force, rate)")
+        acts.append((mech.inputs.index(name), act))
+    return acts
+
+
+def initial_state(acts, has_motor: bool, u0, ud0, current0, pj, dtype):
+    """The state vector at the start, ``(u0, u_dot0, states...)``: the motor's current
+    `current0` (A) when `has_motor` (it is first in `acts`), every other actuator's
+    ``initial_state(pj)``."""
+    parts = [u0.astype(dtype), ud0.astype(dtype)]
+    for i, (_, act) in enumerate(acts):
+        if act.n_states == 0:
+            continue
+        x0 = jnp.asarray(current0, dtype) if (i == 0 and has_motor) else jnp.asarray(act.initial_state(pj), dtype)
+        parts.append(jnp.reshape(x0, (act.n_states,)))
+    return jnp.concatenate(parts)
+
+
+def stroke_bounds(stroke, dof: int, dtype):
+    """``(lo, hi)``, each ``(dof,)``: the inputs' stroke (``(-inf, inf)`` without one)."""
+    if stroke is None:
+        lo = jnp.full((dof,), -jnp.inf, dtype)
+        hi = jnp.full((dof,), jnp.inf, dtype)
+    else:
+        lo, hi = (jnp.broadcast_to(jnp.asarray(b, dtype), (dof,)) for b in stroke)
+    return lo, hi
 
 
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
@@ -347,38 +443,16 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
         raise ValueError("a motor needs a voltage: a parameter name, a number or fn(t, p) -> V")
     if int(steps) < 1:
         raise ValueError(f"steps must be at least 1, got {steps}")
-    acts = []  # (input index, actuator), the motor first
-    if motor is not None:
-        if motor_input is not None and motor_input not in mech.inputs:
-            raise ValueError(f"motor_input {motor_input!r} is not an input; inputs are {list(mech.inputs)}")
-        k_in = 0 if motor_input is None else mech.inputs.index(motor_input)
-        acts.append((k_in, motor if voltage is None else dataclasses.replace(motor, voltage=voltage)))
-    for name, act in (actuators or {}).items():
-        if name not in mech.inputs:
-            raise ValueError(f"actuators: {name!r} is not an input; inputs are {list(mech.inputs)}")
-        if not all(hasattr(act, a) for a in ("n_states", "initial_state", "force", "rate")):
-            raise ValueError(f"actuators[{name!r}]: {type(act).__name__} is not a StatefulActuator "
-                             f"(n_states, initial_state, force, rate)")
-        acts.append((mech.inputs.index(name), act))
+    acts = run_actuators(mech, motor, voltage, motor_input, actuators)
     u0, ud0, guess = _checked(mech, u0, u_dot0, guess, h, t0, stroke)
     dtype = jnp.result_type(u0, ud0, guess, float)
     pj = prepare_params(model, p, dtype, tuple(n for _, a in acts for n in parameter_names(a)))
-    parts = [u0.astype(dtype), ud0.astype(dtype)]
-    for i, (_, act) in enumerate(acts):
-        if act.n_states == 0:
-            continue
-        x0 = jnp.asarray(current0, dtype) if (i == 0 and motor is not None) else jnp.asarray(act.initial_state(pj), dtype)
-        parts.append(jnp.reshape(x0, (act.n_states,)))
-    y0 = jnp.concatenate(parts)
+    y0 = initial_state(acts, motor is not None, u0, ud0, current0, pj, dtype)
     # The jitted batch solve (compiled once per mechanism and options); a dict of scalars
     # is a batch of shape ().
     sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, mechanism_params(model, pj),
                 guess.astype(dtype), options=options)
-    if stroke is None:
-        lo = jnp.full((mech.dof,), -jnp.inf, dtype)
-        hi = jnp.full((mech.dof,), jnp.inf, dtype)
-    else:
-        lo, hi = (jnp.broadcast_to(jnp.asarray(b, dtype), (mech.dof,)) for b in stroke)
+    lo, hi = stroke_bounds(stroke, mech.dof, dtype)
     integ = Integrator(model, method, int(steps), load, tuple(acts), int(close_iters),
                        None if newton_tol is None else float(newton_tol), int(newton_max), options)
     ys, qs, status, t_stop, its = _integrate_jit(integ, pj, jnp.asarray(t0, dtype), jnp.asarray(h, dtype), y0, sol.q, lo, hi)
