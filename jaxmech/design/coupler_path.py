@@ -47,10 +47,11 @@ to ~1e-14 rad, around every local minimum of the sampled distance near the best.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["CURVES", "PARAMS", "TAU", "PathError", "coupler_curve", "cos_transmission_limit", "crank_interval", "crank_intervals",
+__all__ = ["CURVES", "PARAMS", "TAU", "PathError", "CrankInterval", "coupler_curve", "cos_transmission_limit", "crank_interval", "crank_intervals",
            "fully_rotatable", "local_point", "path_error", "transmission_angle"]
 
 PARAMS = ("x0", "y0", "phi", "a", "b", "c", "d", "px", "py")
@@ -107,9 +108,20 @@ def _bounds(a, b, c, d, cmu):
     return lo, hi
 
 
-def crank_interval(a, b, c, d, cmu=1.0, xp=np):
+class CrankInterval(NamedTuple):
+    """The crank's usable set on one mode (``crank_interval``); unpacks like the 5-tuple it
+    replaces.  Angles in rad from the ground line."""
+
+    full: Any  # the crank turns fully
+    center: Any  # the interval is center +- half ...
+    half: Any
+    two: Any  # ... and its mirror -center +- half too
+    closes: Any  # the set is not empty
+
+
+def crank_interval(a, b, c, d, cmu=1.0, xp=np) -> CrankInterval:
     """The crank's usable set on one mode, from the ground line: ``cos theta`` in ``(lo, hi)``
-    (``_bounds``).  Returns ``(full, center, half, two, closes)``: the crank turns fully;
+    (``_bounds``).  Returns a ``CrankInterval`` ``(full, center, half, two, closes)``: the crank turns fully;
     else the interval ``center +- half`` (and its mirror ``-center +- half`` when ``two``);
     ``closes``: the set is not empty.  Within an interval there is no toggle: the mode cannot
     change and the crank does not lock."""
@@ -122,7 +134,7 @@ def crank_interval(a, b, c, d, cmu=1.0, xp=np):
     center = xp.where(around0, 0.0, xp.where(two, 0.5 * (ta + tb), np.pi))
     half = xp.where(around0, tb, xp.where(two, 0.5 * (tb - ta), np.pi - ta))
     closes = (lo < hi) & (lo < 1.0) & (hi > -1.0)
-    return full, center, half, two, closes
+    return CrankInterval(full, center, half, two, closes)
 
 
 def cos_transmission_limit(min_transmission) -> float:

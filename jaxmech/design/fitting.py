@@ -7,6 +7,7 @@ import dataclasses
 import enum
 import functools
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -192,8 +193,21 @@ def _default_optimizer():
     return optax.with_extra_args_support(optax.lbfgs())
 
 
+class FitLoop(NamedTuple):
+    """What the compiled fit loop returns (``_fit_loop``), a row per start: the final
+    designs `params`, objective `value`, ``StopReason`` `reason`, steps taken `nsteps`, and
+    the objective's `history` ``(steps + 1, starts)`` (rows after a start ended repeat its
+    final value)."""
+
+    params: dict
+    value: jax.Array
+    reason: jax.Array
+    nsteps: jax.Array
+    history: jax.Array
+
+
 @functools.partial(jit, static_argnums=tuple(range(10)))
-def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi, p0):
+def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi, p0) -> FitLoop:
     lo, hi = dict(lo), dict(hi)
     tiny = jnp.finfo(jnp.result_type(float)).tiny
 
@@ -266,4 +280,4 @@ def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi
     # Rows after the loop ended repeat the final values.
     rows = jnp.arange(steps + 1)[:, None]
     history = jnp.where(rows <= k, history, v[None, :])
-    return p, v, reason, nsteps, history
+    return FitLoop(p, v, reason, nsteps, history)

@@ -6,11 +6,13 @@ angles spread by arc length, then refined by closest-point iterations
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .coupler_path import TAU, crank_interval, local_point
 
-__all__ = ["placed_starts", "GRID"]
+__all__ = ["placed_starts", "Starts", "GRID"]
 
 
 # =========================================================================== starts (numpy)
@@ -53,18 +55,50 @@ def _random_shapes(rng, m, rotatable_fraction, cmu):
 GRID = 128  #: samples per random shape's coupler curve when placing it on the targets
 
 
-def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, ordered, cmu):
-    """Best-placed random shapes: ``(x (keep, 9), theta (keep, n), mode (keep,), cost (keep,))``
-    in the normalised frame.
+class Starts(NamedTuple):
+    """Best-placed starts (``placed_starts``), in the normalised frame; unpacks like the
+    4-tuple it replaces."""
 
-    Each shape's coupler curve is sampled once (``GRID`` points over its crank interval);
-    a placement assigns the targets crank angles spread by arc length (a phase, a span, a
-    direction), and is scored by the best similarity (or, with prescribed crank angles,
-    scale and translation) taking the curve points to the targets: closed form."""
-    n = targets_n.size
-    closed = curve == "closed"
-    timed = alpha is not None
-    shapes = _random_shapes(rng, n_shapes, 0.5 if curve == "open" and not timed else 1.0, cmu)
+    x: np.ndarray  # (keep, 9) designs (x0, y0, phi, log a, log b, log c, log d, px, py)
+    theta: np.ndarray  # (keep, n) each target's crank angle (rad, from the ground line)
+    mode: np.ndarray  # (keep,) assembly modes
+    cost: np.ndarray  # (keep,) placement's sum of squared distances
+
+
+class ShapeGrid(NamedTuple):
+    """Random four-bar shapes (ground ``d = 1``) and each one's sampled crank interval
+    ``[lo, lo + width)``: ``grid`` ``(m, GRID)`` crank angles (rad); `full`: the crank
+    turns fully."""
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    px: np.ndarray
+    py: np.ndarray
+    full: np.ndarray
+    lo: np.ndarray
+    width: np.ndarray
+    grid: np.ndarray
+
+
+class Placement(NamedTuple):
+    """One assembly mode's placements of every shape (``placement_costs``): `cost`
+    ``(m, P)`` of the best similarity ``T ~ z C + w`` (inf where a placement leaves the
+    interval or degenerates), `z`, `w` ``(m, P)`` complex, the `mode`, and the shapes'
+    sampled coupler curves `curve` ``(m, GRID)`` (NaN where the loop does not close)."""
+
+    cost: np.ndarray
+    z: np.ndarray
+    w: np.ndarray
+    mode: float
+    curve: np.ndarray
+
+
+def shape_grid(rng, n_shapes, rotatable_fraction, cmu) -> ShapeGrid:
+    """`n_shapes` random shapes (``_random_shapes``), each with its crank interval sampled at
+    ``GRID`` angles (a whole turn, or one of its usable intervals, the mirror one chosen at
+    random half the time)."""
+    shapes = _random_shapes(rng, n_shapes, rotatable_fraction, cmu)
     a, b, c, px, py = (shapes[:, i] for i in range(5))
     m = a.size
     full, center, half, two, _ = crank_interval(a, b, c, 1.0, cmu)
@@ -73,16 +107,23 @@ def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, or
     width = np.where(full, TAU, 2 * half)
     g = np.arange(GRID)
     grid = lo[:, None] + width[:, None] * np.where(full[:, None], g / GRID, (g + 0.5) / GRID)  # (m, GRID)
-    sub = np.unique(np.round(np.linspace(0, n - 1, min(n, 32))).astype(int))
+    return ShapeGrid(a, b, c, px, py, full, lo, width, grid)
+
+
+def placement_positions(sg: ShapeGrid, targets_n, alpha, closed: bool, rng):
+    """``(U, phis)``: the targets' positions ``U (m, P, n)`` in ``[0, 1)`` along each shape's
+    interval, for P placements: with prescribed crank angles, 8 random ground angles `phis`
+    ``(m, 8)``; for a closed curve, 12 phases in both directions spread by arc length;
+    otherwise 3 spans at 3 offsets in both directions (`phis` None)."""
+    n, m = targets_n.size, sg.a.size
     frac = _arc_fractions(targets_n, closed)
-    # placements as positions u in [0, 1) along each shape's interval, (m, P, n)
-    us = []
-    if timed:
+    us, phis = [], None
+    if alpha is not None:
         phis = rng.uniform(-np.pi, np.pi, (m, 8))
-        u = (alpha[None, None, :] - phis[:, :, None] - lo[:, None, None]) / width[:, None, None]
-        u = np.where(full[:, None, None], np.mod(u, 1.0), u)
-        us.append(u)
-    elif closed:
+        u = (alpha[None, None, :] - phis[:, :, None] - sg.lo[:, None, None]) / sg.width[:, None, None]
+        u = np.where(sg.full[:, None, None], np.mod(u, 1.0), u)
+        return u, phis
+    if closed:
         for ph in np.linspace(0, 1, 12, endpoint=False):
             for sgn in (1.0, -1.0):
                 us.append(np.broadcast_to(np.mod(ph + sgn * frac, 1.0), (m, n)))
@@ -92,17 +133,23 @@ def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, or
                 for sgn in (1.0, -1.0):
                     v = off * (1 - span) + span * (frac if sgn > 0 else 1 - frac)
                     us.append(np.broadcast_to(v * 0.999 + 0.0005, (m, n)))
-    U = us[0] if timed else np.stack(us, axis=1)  # (m, P, n)
+    return np.stack(us, axis=1), phis
+
+
+def placement_costs(sg: ShapeGrid, U, phis, sub, Ts, mode_choices) -> list:
+    """A ``Placement`` per assembly mode: the sampled curve points at the placements'
+    positions of the targets `sub` (``Ts``), taken to them by the best similarity (rotation
+    fixed by `phis` when crank angles are prescribed): closed form."""
+    m = sg.a.size
+    Tc = Ts - Ts.mean()
     inside = np.all((U >= 0) & (U < 1), axis=-1)
     idx = np.clip(np.floor(U[..., sub] * GRID).astype(int), 0, GRID - 1)
-    Ts = targets_n[sub]
-    Tc = Ts - Ts.mean()
     cands = []
     for mode in mode_choices:
-        C, s2 = local_point(np, a[:, None], b[:, None], c[:, None], 1.0, px[:, None], py[:, None], mode, grid)
+        C, s2 = local_point(np, sg.a[:, None], sg.b[:, None], sg.c[:, None], 1.0, sg.px[:, None], sg.py[:, None], mode, sg.grid)
         C = np.where(s2 >= 0, C, np.nan)
         P = np.take_along_axis(C[:, None, :], idx.reshape(m, -1, sub.size), axis=2) if U.ndim == 3 else None
-        if timed:
+        if phis is not None:
             rot = np.exp(1j * phis)[:, :, None]
             Q = rot * P
             Qc = Q - Q.mean(-1, keepdims=True)
@@ -116,44 +163,83 @@ def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, or
             w = Ts.mean() - z * P.mean(-1)
             cost = np.sum(np.abs(z[..., None] * Pc - Tc) ** 2, -1)
         cost = np.where(inside & np.isfinite(cost) & (np.abs(z) > 1e-6), cost, np.inf)
-        cands.append((cost, z, w, mode, C))
-    costs = np.stack([cd[0] for cd in cands])  # (modes, m, P)
+        cands.append(Placement(cost, z, w, mode, C))
+    return cands
+
+
+class ClosestPointFit(NamedTuple):
+    """The placements after closest-point iterations (``closest_point_fit``): the similarity
+    `z`, `w` of every row, the kept rows `sel`, their targets' crank angles `theta` and
+    their costs `cost`."""
+
+    z: np.ndarray
+    w: np.ndarray
+    sel: np.ndarray
+    theta: np.ndarray
+    cost: np.ndarray
+
+
+def closest_point_fit(curves, z, w, Ts, targets_n, grid_rows, keep: int) -> ClosestPointFit:
+    """Closest-point iterations on placed curves ``z C + w`` (`curves` ``(K, GRID)``): each
+    target of `Ts` to its nearest point of the placed curve, then the best similarity again
+    (the distance to the curve, not to a timing guess); the best `keep` kept, every
+    target's crank angle on them from the rows' `grid_rows`."""
+    Tc = Ts - Ts.mean()
+    for _ in range(2):
+        jj = _nearest(curves, z, w, Ts)
+        P = np.take_along_axis(curves, jj, axis=1)
+        Pc = P - P.mean(-1, keepdims=True)
+        z = np.sum(np.conj(Pc) * Tc, -1) / np.maximum(np.sum(np.abs(Pc) ** 2, -1), 1e-300)
+        w = Ts.mean() - z * P.mean(-1)
+    jj = _nearest(curves, z, w, Ts)
+    P = np.take_along_axis(curves, jj, axis=1)
+    cost = np.sum(np.abs(z[:, None] * P + w[:, None] - Ts) ** 2, -1)
+    cost = np.where(np.isfinite(cost) & (np.abs(z) > 1e-6), cost, np.inf)
+    sel = np.argsort(cost)[:keep]
+    sel = sel[np.isfinite(cost[sel])]
+    jj = _nearest(curves[sel], z[sel], w[sel], targets_n)
+    theta = np.take_along_axis(grid_rows[sel], jj, axis=1)
+    return ClosestPointFit(z, w, sel, theta, cost[sel])
+
+
+def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, ordered, cmu) -> Starts:
+    """Best-placed random shapes: ``Starts(x (keep, 9), theta (keep, n), mode (keep,), cost
+    (keep,))`` in the normalised frame.
+
+    Each shape's coupler curve is sampled once (``GRID`` points over its crank interval);
+    a placement assigns the targets crank angles spread by arc length (a phase, a span, a
+    direction), and is scored by the best similarity (or, with prescribed crank angles,
+    scale and translation) taking the curve points to the targets: closed form.  Stages:
+    ``shape_grid``, ``placement_positions``, ``placement_costs``, ``closest_point_fit``."""
+    n = targets_n.size
+    closed = curve == "closed"
+    timed = alpha is not None
+    sg = shape_grid(rng, n_shapes, 0.5 if curve == "open" and not timed else 1.0, cmu)
+    sub = np.unique(np.round(np.linspace(0, n - 1, min(n, 32))).astype(int))
+    U, phis = placement_positions(sg, targets_n, alpha, closed, rng)
+    Ts = targets_n[sub]
+    cands = placement_costs(sg, U, phis, sub, Ts, mode_choices)
+    costs = np.stack([cd.cost for cd in cands])  # (modes, m, P)
     icp = not (timed or ordered)
     flat = np.argsort(costs, axis=None)[: (2 * keep if icp else keep)]
     flat = flat[np.isfinite(costs.reshape(-1)[flat])]
     gi, i, j = np.unravel_index(flat, costs.shape)
-    z = np.array([cands[g][1][ii, jj] for g, ii, jj in zip(gi, i, j)])
-    w = np.array([cands[g][2][ii, jj] for g, ii, jj in zip(gi, i, j)])
-    mode = np.array([cands[g][3] for g in gi], float)
-    curves = np.stack([cands[g][4][ii] for g, ii in zip(gi, i)]) if flat.size else np.zeros((0, GRID), complex)
+    z = np.array([cands[g].z[ii, jj] for g, ii, jj in zip(gi, i, j)])
+    w = np.array([cands[g].w[ii, jj] for g, ii, jj in zip(gi, i, j)])
+    mode = np.array([cands[g].mode for g in gi], float)
+    curves = np.stack([cands[g].curve[ii] for g, ii in zip(gi, i)]) if flat.size else np.zeros((0, GRID), complex)
     if icp and flat.size:
-        # closest-point iterations: each target to its nearest point of the placed curve,
-        # then the best similarity again (the distance to the curve, not to a timing guess)
-        for _ in range(2):
-            jj = _nearest(curves, z, w, Ts)
-            P = np.take_along_axis(curves, jj, axis=1)
-            Pc = P - P.mean(-1, keepdims=True)
-            z = np.sum(np.conj(Pc) * Tc, -1) / np.maximum(np.sum(np.abs(Pc) ** 2, -1), 1e-300)
-            w = Ts.mean() - z * P.mean(-1)
-        jj = _nearest(curves, z, w, Ts)
-        P = np.take_along_axis(curves, jj, axis=1)
-        cost = np.sum(np.abs(z[:, None] * P + w[:, None] - Ts) ** 2, -1)
-        cost = np.where(np.isfinite(cost) & (np.abs(z) > 1e-6), cost, np.inf)
-        sel = np.argsort(cost)[:keep]
-        sel = sel[np.isfinite(cost[sel])]
-        jj = _nearest(curves[sel], z[sel], w[sel], targets_n)
-        theta = np.take_along_axis(grid[i[sel]], jj, axis=1)
-        cost = cost[sel]
+        z, w, sel, theta, cost = closest_point_fit(curves, z, w, Ts, targets_n, sg.grid[i], keep)
     else:
         sel = np.arange(flat.size)
         cost = costs.reshape(-1)[flat]
-        theta = lo[i, None] + width[i, None] * U[i, j]
+        theta = sg.lo[i, None] + sg.width[i, None] * U[i, j]
         theta = np.unwrap(theta, axis=1) if (timed or closed) else theta  # ordered crank angles, unwrapped
     ii, s_ = i[sel], np.abs(z[sel])
-    lens = np.log(np.stack([a[ii], b[ii], c[ii], np.ones(ii.size)], axis=1) * s_[:, None])
+    lens = np.log(np.stack([sg.a[ii], sg.b[ii], sg.c[ii], np.ones(ii.size)], axis=1) * s_[:, None])
     x = np.concatenate([np.stack([w[sel].real, w[sel].imag, np.angle(z[sel])], axis=1), lens,
-                        np.stack([px[ii] * s_, py[ii] * s_], axis=1)], axis=1)
-    return x, theta.reshape(-1, n), mode[sel], cost
+                        np.stack([sg.px[ii] * s_, sg.py[ii] * s_], axis=1)], axis=1)
+    return Starts(x, theta.reshape(-1, n), mode[sel], cost)
 
 
 def _nearest(curves, z, w, targets, block=64):

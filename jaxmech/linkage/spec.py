@@ -115,6 +115,42 @@ class Linkage:
             raise ValueError(f"{self.name}: points must be a mapping {{name: (x, y)}}")
         self.points = {n: _point(v, f"points[{n!r}]") for n, v in points.items()}
         _names(tuple(self.points), "points")
+        links, ground = self._read_links(links, ground)
+        block_of = self._read_sliders(links, sliders)
+        slot_specs = self._read_slots(links, ground, slots)
+        acts = self._read_actuators(actuators)
+        drivers = _names(driver, "driver")
+        if not drivers:
+            raise ValueError(f"{self.name}: say what is driven: driver= a crank link, a slider or an actuator")
+        drivers = tuple(f"block_{d}" if d in self.points and f"block_{d}" in block_of else d for d in drivers)
+        self.mass_spec = self._masses(links, mass, inertia, centre)
+        g_vec = None if gravity is None else (complex(0, -_number(gravity, "m/s^2", "gravity")) if np.ndim(gravity) == 0 else _point(gravity, "gravity", "m/s^2"))
+        self.g = 0.0 if g_vec is None else abs(g_vec)
+        force_specs = self._read_forces(links, forces)
+        self.moment_values = {k: _number(v, "N m", f"moments[{k!r}]") for k, v in dict(moments or {}).items()}
+        for k in self.moment_values:
+            if k not in links:
+                raise ValueError(f"{self.name}: moments: {k!r} is not a link")
+        self.extra = {k: float(v) for k, v in dict(params or {}).items()}
+        self.links = links
+        self.ground = ground
+        self.topology = Topology(
+            # the name is not the user's: every drawing of one topology shares compiled programs
+            name="linkage", points=tuple(self.points), links=tuple((k, tuple(v)) for k, v in links.items()),
+            ground=tuple(ground), actuators=tuple(acts.items()), sliders=tuple(block_of.items()), slots=tuple(slot_specs),
+            drivers=drivers, gravity=(-1j if g_vec is None or abs(g_vec) == 0 else g_vec / abs(g_vec)),
+            forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra))
+        try:
+            self.built: Built = build(self.topology)
+        except ValueError as err:  # said in the linkage's own name
+            text = str(err)
+            raise ValueError(f"{self.name}: {text.removeprefix('linkage: ')}") from None
+        self._values = self._drawing_values()
+
+    # ----------------------------------------------------------------- reading the drawing
+    def _read_links(self, links, ground):
+        """``(links {name: [points]}, ground [points])``, every point checked against the
+        drawing's and listed once."""
         links = {str(k): list(_names(v, f"links[{k!r}]")) for k, v in dict(links).items()}
         ground = list(_names(ground, "ground"))
         for k, pts in [*links.items(), ("ground", ground)]:
@@ -125,7 +161,12 @@ class Linkage:
                 raise ValueError(f"{self.name}: {k} lists a point twice: {pts}")
         if GROUND in links:
             raise ValueError(f"{self.name}: 'ground' is the frame; give its points as ground=")
-        self.slider_angles: dict = {}
+        return links, ground
+
+    def _read_sliders(self, links, sliders) -> dict:
+        """``{slider block: guide}`` (a slider on a point gets a block link ``block_<point>``,
+        added to `links`); every guide's angle (rad) into ``slider_angles``."""
+        self.slider_angles = {}
         block_of = {}
         for key, spec in dict(sliders or {}).items():
             spec = {"on": spec} if isinstance(spec, str) else dict(spec)
@@ -147,7 +188,13 @@ class Linkage:
             else:
                 raise ValueError(f"{self.name}: sliders[{key!r}] needs the guide's angle= (rad or '30deg') or through= a point")
             block_of[block] = guide
-        self.slot_angles: dict = {}
+        return block_of
+
+    def _read_slots(self, links, ground, slots) -> list:
+        """``[(pin, body, centre point or "")]``: circular slots by their centre (a point of
+        the body, or one added at the given coordinates), straight ones by their angle (rad,
+        into ``slot_angles``)."""
+        self.slot_angles = {}
         slot_specs = []
         for pin, spec in dict(slots or {}).items():
             spec = dict(spec)
@@ -173,19 +220,21 @@ class Linkage:
                 slot_specs.append((pin, body, ""))
             else:
                 raise ValueError(f"{self.name}: slots[{pin!r}] needs center= (a circular slot) or angle= (a straight one)")
+        return slot_specs
+
+    def _read_actuators(self, actuators) -> dict:
+        """``{actuator: (point, point)}``: each joins two points of the drawing."""
         acts = {}
         for k, v in dict(actuators or {}).items():
             pts = _names(v, f"actuators[{k!r}]")
             if len(pts) != 2 or any(x not in self.points for x in pts):
                 raise ValueError(f"{self.name}: actuators[{k!r}] joins two points of the drawing, got {v!r}")
             acts[k] = pts
-        drivers = _names(driver, "driver")
-        if not drivers:
-            raise ValueError(f"{self.name}: say what is driven: driver= a crank link, a slider or an actuator")
-        drivers = tuple(f"block_{d}" if d in self.points and f"block_{d}" in block_of else d for d in drivers)
-        self.mass_spec = self._masses(links, mass, inertia, centre)
-        g_vec = None if gravity is None else (complex(0, -_number(gravity, "m/s^2", "gravity")) if np.ndim(gravity) == 0 else _point(gravity, "gravity", "m/s^2"))
-        self.g = 0.0 if g_vec is None else abs(g_vec)
+        return acts
+
+    def _read_forces(self, links, forces) -> list:
+        """``[(point, link)]``: the link each constant force acts on (the point's only link,
+        or ``on=``); the forces (N, complex) into ``force_values``."""
         force_specs, self.force_values = [], {}
         for x, spec in dict(forces or {}).items():
             spec = spec if isinstance(spec, Mapping) else {"force": spec}
@@ -195,25 +244,7 @@ class Linkage:
                 raise ValueError(f"{self.name}: forces[{x!r}]: say which link it acts on (on=); the point is on {owners}")
             force_specs.append((x, on))
             self.force_values[x] = _point(spec["force"], f"forces[{x!r}]", "N")
-        self.moment_values = {k: _number(v, "N m", f"moments[{k!r}]") for k, v in dict(moments or {}).items()}
-        for k in self.moment_values:
-            if k not in links:
-                raise ValueError(f"{self.name}: moments: {k!r} is not a link")
-        self.extra = {k: float(v) for k, v in dict(params or {}).items()}
-        self.links = links
-        self.ground = ground
-        self.topology = Topology(
-            # the name is not the user's: every drawing of one topology shares compiled programs
-            name="linkage", points=tuple(self.points), links=tuple((k, tuple(v)) for k, v in links.items()),
-            ground=tuple(ground), actuators=tuple(acts.items()), sliders=tuple(block_of.items()), slots=tuple(slot_specs),
-            drivers=drivers, gravity=(-1j if g_vec is None or abs(g_vec) == 0 else g_vec / abs(g_vec)),
-            forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra))
-        try:
-            self.built: Built = build(self.topology)
-        except ValueError as err:  # said in the linkage's own name
-            text = str(err)
-            raise ValueError(f"{self.name}: {text.removeprefix('linkage: ')}") from None
-        self._values = self._drawing_values()
+        return force_specs
 
     # ----------------------------------------------------------------- mass properties
     def _masses(self, links, mass, inertia, centre):

@@ -13,7 +13,7 @@ import dataclasses
 import sys
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -186,6 +186,153 @@ def summary_line(label: str, designs: int, counts: dict, seconds: float, tail: s
     return f"{label}: {designs} designs, {ok} converged, failed: {failed}; {seconds:.1f} s; {tail}"
 
 
+def _chunks(client, scene, job, params, starts, timeout):
+    """The chunks starting at `starts`, ``(start, end, result or exception)``: run here one
+    after another, or as Dask tasks of `client`."""
+    return _local_chunks(scene, job, params, starts) if client is None else _dask_chunks(client, scene, job, params, starts, timeout)
+
+
+class Gathered(NamedTuple):
+    """A sweep's chunks gathered in memory (``gather_chunks``): `columns` ``{name: (D,
+    N)}`` and `status` ``(D, N)`` (None when every chunk failed), the per-design `errors`
+    and the first chunk's exception (`first_error`, None if none failed)."""
+
+    columns: dict | None
+    status: np.ndarray | None
+    errors: dict
+    first_error: BaseException | None
+
+
+def gather_chunks(chunks, job: Job, params, points: int, bar) -> Gathered:
+    """Every chunk's columns and statuses copied into ``(D, points)`` arrays; a failed
+    chunk's designs stay ``NONFINITE`` with the reason in ``errors``."""
+    d = len(next(iter(params.values())))
+    cols = status = None
+    errors: dict[int, str] = {}
+    first_exc = None
+    for s, e, res in chunks:
+        if isinstance(res, BaseException):
+            first_exc = first_exc or res
+            errors.update(lost_chunk(job, (), s, {k: v[s:e] for k, v in params.items()}, res).errors)
+        else:
+            if cols is None:
+                cols = {k: np.full((d, points), np.nan, v.dtype) for k, v in res.columns.items()}
+                status = np.full((d, points), int(Status.NONFINITE), np.int32)
+            for k, v in res.columns.items():
+                cols[k][s:e] = v
+            status[s:e] = res.status
+            errors.update(res.errors)
+        bar.update(e - s)
+    return Gathered(cols, status, errors, first_exc)
+
+
+class Streamed(NamedTuple):
+    """What ``stream_chunks`` wrote: `rows` and `written` chunks, the `lost` chunks
+    ``{start: exception}``, and the result columns' names (None if no chunk came back)."""
+
+    rows: int
+    written: int
+    lost: dict
+    names: tuple | None
+
+
+def stream_chunks(chunks, writer: DatasetWriter, counts: dict, bar) -> Streamed:
+    """Every finished chunk handed to `writer` (its statuses added to `counts`, in place);
+    a failed one kept aside in ``lost``."""
+    rows = written = 0
+    lost: dict[int, BaseException] = {}
+    names_out = None
+    for s, e, res in chunks:
+        if isinstance(res, BaseException):
+            lost[s] = res
+        else:
+            rep = writer.add(res)
+            names_out = names_out or rep.names
+            rows, written = rows + rep.rows, written + 1
+            for k, v in rep.counts.items():
+                counts[k] = counts.get(k, 0) + v
+        bar.update(e - s)
+    return Streamed(rows, written, lost, names_out)
+
+
+def write_lost(writer: DatasetWriter, lost: dict, names_out, state, job: Job, params, counts: dict, rows: int):
+    """The lost chunks written as failed rows (``NONFINITE``, the error kept), with the
+    result columns of this run, or as an earlier run wrote them.  Returns ``(rows,
+    {start: message})``; `counts` updated in place."""
+    if names_out is None:  # the result columns, as an earlier run wrote them
+        import json
+
+        import pyarrow.parquet as pq
+
+        names_out = tuple(json.loads(pq.read_schema(state.example).metadata[b"jaxmech.result_columns"]))
+    dtype = np.dtype(jnp.result_type(float))
+    lost_msgs = {}
+    for s, exc in sorted(lost.items()):
+        part = {k: v[s:s + job.chunk] for k, v in params.items()}
+        rep: ChunkReport = writer.add_lost(lost_chunk(job, names_out, s, part, exc, dtype))
+        rows += rep.rows
+        counts[Status.NONFINITE.name] = counts.get(Status.NONFINITE.name, 0) + rep.designs
+        lost_msgs[s] = next(iter(rep.errors.values()))
+    return rows, lost_msgs
+
+
+def write_chunks(chunks, writer: DatasetWriter, state, job: Job, params, counts: dict, bar):
+    """Stream `chunks` into `writer` (``stream_chunks``), then the lost ones as failed rows
+    (``write_lost``), and close it; on any error (a Ctrl-C too) abort it, keeping the chunks
+    in memory for a rerun.  Returns ``(rows, chunks written, {start: lost message})``."""
+    lost_msgs = {}
+    try:
+        with bar:
+            rows, written, lost, names_out = stream_chunks(chunks, writer, counts, bar)
+        if lost:
+            if names_out is None and not state.done:
+                first = next(iter(lost.values()))
+                raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
+            rows, lost_msgs = write_lost(writer, lost, names_out, state, job, params, counts, rows)
+        writer.close()
+    except BaseException:
+        writer.abort()  # the chunks in memory are kept: a rerun skips them
+        raise
+    return rows, written + len(lost), lost_msgs
+
+
+def plan_dataset_job(client, scene, job: Job, names, d: int, state, budget):
+    """``(job, devices)``: the chunk size an earlier run of the dataset chose (nothing to
+    compile when it finished), or planned for the local devices or the Dask workers."""
+    chunk, done = state.chunk, state.done
+    devices = jax.device_count()
+    if chunk is not None and all(s in done for s in range(0, d, chunk)):
+        pass  # finished earlier: nothing to compile
+    elif client is None:
+        job, _ = plan_chunk(scene, job, names, d, chunk, budget)
+    else:
+        job, devices = _dask_job(client, scene, job, names, d, chunk, budget)
+    return job, devices
+
+
+def open_writer(out, manifest, scene, names, figures: bool, points: int, state, chunk: int, rows_per_group: int,
+                rows_per_file: int) -> DatasetWriter:
+    """The manifest written with the chunk size, and a writer of the dataset's row groups
+    (`names`: the design parameters, their units from the scene)."""
+    write_manifest(out, manifest, chunk)
+    dataset = Dataset(path=str(out), figures=figures, points=points, scene=scene.name,
+                      parameter_units=tuple((k, scene.parameters.get(k, ("", ""))[0]) for k in names))
+    return DatasetWriter(dataset, state, rows_per_group, rows_per_file)
+
+
+def writer_info(writer: DatasetWriter, rows_per_group, rows_per_file) -> dict:
+    """The summary's file counts and row-group and file sizes."""
+    return dict(files=len(writer.parts), lost_files=len(writer.lost_files), rows_per_group=int(rows_per_group),
+                rows_per_file=int(rows_per_file))
+
+
+def check_row_counts(rows_per_group, rows_per_file) -> None:
+    """``ValueError`` unless both are positive integers."""
+    for name, v in (("rows_per_group", rows_per_group), ("rows_per_file", rows_per_file)):
+        if not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"sweep_dataset: {name} must be a positive integer, got {v!r}")
+
+
 # =========================================================================== in memory
 def sweep_scene(
     scene,
@@ -246,31 +393,15 @@ def sweep_scene(
     job = Job(points=points, options=options, figures=None, chunk=0)
     if client is None:
         job, per = plan_chunk(scene, job, names, d, chunk_size, budget)
-        devices, chunks = jax.device_count(), None
+        devices = jax.device_count()
     else:
         job, devices = _dask_job(client, scene, job, names, d, chunk_size, budget)
         per = float("nan")
     starts = list(range(0, d, job.chunk))
-    chunks = _local_chunks(scene, job, params, starts) if client is None else _dask_chunks(client, scene, job, params, starts, timeout)
-    cols = status = None
-    errors: dict[int, str] = {}
-    first_exc = None
     bar = _progress_bar(f"sweep {scene.name}", d, 0, progress)
     shown = not bar.disable
     with bar:
-        for s, e, res in chunks:
-            if isinstance(res, BaseException):
-                first_exc = first_exc or res
-                errors.update(lost_chunk(job, (), s, {k: v[s:e] for k, v in params.items()}, res).errors)
-            else:
-                if cols is None:
-                    cols = {k: np.full((d, points), np.nan, v.dtype) for k, v in res.columns.items()}
-                    status = np.full((d, points), int(Status.NONFINITE), np.int32)
-                for k, v in res.columns.items():
-                    cols[k][s:e] = v
-                status[s:e] = res.status
-                errors.update(res.errors)
-            bar.update(e - s)
+        cols, status, errors, first_exc = gather_chunks(_chunks(client, scene, job, params, starts, timeout), job, params, points, bar)
     if cols is None:
         raise RuntimeError(f"sweep_scene: every chunk failed; first error: {type(first_exc).__name__}: {first_exc}") from first_exc
     seconds = time.perf_counter() - t0
@@ -337,79 +468,28 @@ def sweep_dataset(
     status (and, if never solved, an ``error`` message), never dropped.
     """
     scene, budget = _prepare(scene, points, chunk_size, memory_budget, "sweep_dataset")
-    for name, v in (("rows_per_group", rows_per_group), ("rows_per_file", rows_per_file)):
-        if not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"sweep_dataset: {name} must be a positive integer, got {v!r}")
+    check_row_counts(rows_per_group, rows_per_file)
     figures = _figures(figures)
     params = design_table(scene, grid, table, who="sweep_dataset")
-    d = len(next(iter(params.values())))
-    names = tuple(params)
-    t0 = time.perf_counter()
+    d, names, t0 = len(next(iter(params.values()))), tuple(params), time.perf_counter()
     manifest = manifest_of(scene, params, figures=figures, points=points, options=options,
                            x64=bool(jax.config.jax_enable_x64))
     state = prepare_dataset(out, manifest, chunk_size)
-    chunk, done = state.chunk, state.done
-    job = Job(points=points, options=options, figures=figures, chunk=chunk or 0)
-    devices = jax.device_count()
-    if chunk is not None and all(s in done for s in range(0, d, chunk)):
-        pass  # finished earlier: nothing to compile
-    elif client is None:
-        job, _ = plan_chunk(scene, job, names, d, chunk, budget)
-    else:
-        job, devices = _dask_job(client, scene, job, names, d, chunk, budget)
-    write_manifest(out, manifest, job.chunk)
-    dataset = Dataset(path=str(out), figures=figures is not None, points=points, scene=scene.name,
-                      parameter_units=tuple((k, scene.parameters.get(k, ("", ""))[0]) for k in names))
-    writer = DatasetWriter(dataset, state, rows_per_group, rows_per_file)
+    done = state.done  # {start: designs} of the chunks an earlier run wrote
+    job, devices = plan_dataset_job(client, scene, Job(points=points, options=options, figures=figures, chunk=state.chunk or 0),
+                                    names, d, state, budget)
+    writer = open_writer(out, manifest, scene, names, figures is not None, points, state, job.chunk, rows_per_group, rows_per_file)
     starts = [s for s in range(0, d, job.chunk) if s not in done]
     counts: dict[str, int] = dict(state.counts)
-    skipped_designs = sum(done.values())
     label = f"sweep {scene.name}"
-    rows = written = 0
-    lost: dict[int, BaseException] = {}
-    names_out = None
-    lost_msgs = {}
-    bar = _progress_bar(label, d, skipped_designs, progress)
+    bar = _progress_bar(label, d, sum(done.values()), progress)
     shown = not bar.disable
-    try:
-        chunks = _local_chunks(scene, job, params, starts) if client is None else _dask_chunks(client, scene, job, params, starts, timeout)
-        with bar:
-            for s, e, res in chunks:
-                if isinstance(res, BaseException):
-                    lost[s] = res
-                else:
-                    rep = writer.add(res)
-                    names_out = names_out or rep.names
-                    rows, written = rows + rep.rows, written + 1
-                    for k, v in rep.counts.items():
-                        counts[k] = counts.get(k, 0) + v
-                bar.update(e - s)
-        if lost:
-            if names_out is None and not done:
-                first = next(iter(lost.values()))
-                raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
-            if names_out is None:  # the result columns, as an earlier run wrote them
-                import json
-
-                import pyarrow.parquet as pq
-
-                names_out = tuple(json.loads(pq.read_schema(state.example).metadata[b"jaxmech.result_columns"]))
-            dtype = np.dtype(jnp.result_type(float))
-            for s, exc in sorted(lost.items()):
-                part = {k: v[s:s + job.chunk] for k, v in params.items()}
-                rep: ChunkReport = writer.add_lost(lost_chunk(job, names_out, s, part, exc, dtype))
-                rows += rep.rows
-                counts[Status.NONFINITE.name] = counts.get(Status.NONFINITE.name, 0) + rep.designs
-                lost_msgs[s] = next(iter(rep.errors.values()))
-        writer.close()
-    except BaseException:
-        writer.abort()  # the chunks in memory are kept: a rerun skips them
-        raise
+    rows, chunks_written, lost_msgs = write_chunks(_chunks(client, scene, job, params, starts, timeout), writer, state, job, params,
+                                                   counts, bar)
     info = dict(label=label, chunk_size=job.chunk, n_chunks=-(-d // job.chunk), devices=devices, outputs=job.outputs,
                 backend="local" if client is None else "dask", mode="trace" if figures is None else "figures",
-                retried_lost=len(state.lost), files=len(writer.parts), lost_files=len(writer.lost_files),
-                rows_per_group=int(rows_per_group), rows_per_file=int(rows_per_file))
-    summary = SweepSummary(path=str(out), designs=d, counts=counts, rows_written=rows, chunks_written=written + len(lost),
+                retried_lost=len(state.lost), **writer_info(writer, rows_per_group, rows_per_file))
+    summary = SweepSummary(path=str(out), designs=d, counts=counts, rows_written=rows, chunks_written=chunks_written,
                            chunks_skipped=len(done), lost=lost_msgs, seconds=time.perf_counter() - t0, info=info)
     if shown:
         print(summary.line(), file=sys.stderr)
