@@ -11,12 +11,16 @@ scipy ``fsolve`` loop with 2x2 solves for velocity and acceleration, as a new us
 write it) and pylinkage's first call (when installed), each as a whole process.
 
 The warm run of a case also counts the stored executables it loaded (``jaxmech.stored``:
-a new process calls the stored executable without tracing, lowering or compiling it); ``--baseline DIR`` runs every
+a new process calls the stored executable without tracing, lowering or compiling it).
+``import jaxmech`` switches no JAX cache on (it did up to 7ceb4c3): by default a case runs
+as a user who leaves JAX's persistent cache off, with the library's store alone;
+``--jax-cache`` runs every case as a user who calls ``jaxmech.enable_compile_cache()`` (the
+same folder; the command-line cases switch it on themselves).  ``--baseline DIR`` runs every
 case a second time, interleaved, with the jaxmech package of another checkout (``DIR``, e.g.
 ``git worktree add DIR <commit>``), so before/after figures are taken side by side under the
 same load; the load average is recorded around every case.
 
-Run: ``python -m benchmarks.latency [--quick] [--cases a,b] [--baseline DIR] [--warm-repeats N]``; writes
+Run: ``python -m benchmarks.latency [--quick] [--cases a,b] [--baseline DIR] [--warm-repeats N] [--jax-cache]``; writes
 ``results/latency.json``.
 """
 
@@ -54,6 +58,8 @@ jax.monitoring.register_event_listener(_on_event)
 import jax.numpy as jnp
 import numpy as np
 import jaxmech as jm
+if os.environ.get("LATENCY_JAX_CACHE") == "1":  # --jax-cache: the user opts in to JAX's cache
+    jm.enable_compile_cache()
 t_import = time.perf_counter() - t_start
 MARKS = {}
 def mark(name, t0):
@@ -221,6 +227,7 @@ def _hlo_sizes(dump_dir: Path) -> dict[str, int]:
 
 def _env(cache: Path | None, dump: Path | None, tree: Path | None = None) -> dict[str, str]:
     env = dict(os.environ)
+    env["LATENCY_JAX_CACHE"] = "1" if JAX_CACHE[0] else "0"
     if tree is not None:  # the jaxmech package of another checkout shadows this one
         env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", str(ROOT))])
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
@@ -302,9 +309,15 @@ def run_reference(script: str) -> dict:
     return {"process_s": wall, "returncode": rc, **({"error": text[-500:]} if rc else {})}
 
 
-def run(quick: bool = False, cases: list[str] | None = None, baseline: Path | None = None, warm_repeats: int = 1) -> dict:
+# --jax-cache: every case calls jaxmech.enable_compile_cache() after its import
+JAX_CACHE = [False]
+
+
+def run(quick: bool = False, cases: list[str] | None = None, baseline: Path | None = None, warm_repeats: int = 1,
+        jax_cache: bool = False) -> dict:
+    JAX_CACHE[0] = jax_cache
     names = cases or (["fourbar_stroke", "fourbar_rebuild_and_resize"] if quick else list(CASES) + list(CLI_CASES))
-    result: dict = {"cases": {}, "reference": {}}
+    result: dict = {"cases": {}, "reference": {}, "jax_cache_opt_in": jax_cache}
     result["reference"]["fsolve_fourbar"] = min((run_reference(FSOLVE_FOURBAR) for _ in range(3)), key=lambda r: r["process_s"])
     result["reference"]["python_empty"] = run_reference("pass")
     try:
@@ -340,10 +353,11 @@ def main(argv=None):
     parser.add_argument("--cases", default=None, help="comma-separated case names (default: all)")
     parser.add_argument("--baseline", default=None, help="a checkout of another commit: run every case with its jaxmech too, interleaved")
     parser.add_argument("--warm-repeats", type=int, default=1, help="warm runs per case; the median is reported (a shared machine is noisy)")
+    parser.add_argument("--jax-cache", action="store_true", help="every case switches JAX's persistent cache on (jaxmech.enable_compile_cache)")
     args = parser.parse_args(argv)
     cases = args.cases.split(",") if args.cases else None
     baseline = Path(args.baseline).resolve() if args.baseline else None
-    res = run(quick=args.quick, cases=cases, baseline=baseline, warm_repeats=args.warm_repeats)
+    res = run(quick=args.quick, cases=cases, baseline=baseline, warm_repeats=args.warm_repeats, jax_cache=args.jax_cache)
     path = write_result("latency", res, out_dir=args.out)
     print(json.dumps(res.get("ratios", {}), indent=1))
     print(f"wrote {path}")

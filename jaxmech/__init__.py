@@ -6,7 +6,6 @@ Positions by a batched Newton solve of the loop-closure equations; every derivat
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import cache as _cache_module  # noqa: F401 (switched on below)
 from .actuators import DCMotor as DCMotor
 from .actuators import HydraulicCylinder as HydraulicCylinder
 from .actuators import LinearSpring as LinearSpring
@@ -62,8 +61,6 @@ from .status import status_counts as status_counts
 from .status import status_message as status_message
 
 from .cache import enable_compile_cache as enable_compile_cache
-
-_cache_module.enable_default_cache()
 
 try:
     __version__ = _version("jaxmech")

@@ -12,9 +12,12 @@ jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
 
 Values are SI (m, rad, s, kg, N); a ``--set`` value may carry a unit instead
 (``--set alpha0=65deg``, ``--set a1=275mm``), which is checked against the parameter's.  The command is an application, not the library: it
-runs JAX in float64 and keeps compiled kernels in a persistent cache
-(``$XDG_CACHE_HOME/jaxmech/xla``, default ``~/.cache/jaxmech/xla``; set
-``JAX_COMPILATION_CACHE_DIR`` to move it), which makes a second run several times faster.
+configures JAX for its own process, where the library never does: float64 on, and JAX's
+persistent compilation cache switched on (``jaxmech.enable_compile_cache``, in
+``$XDG_CACHE_HOME/jaxmech/xla``, default ``~/.cache/jaxmech/xla``; ``JAXMECH_COMPILE_CACHE=DIR``
+moves it, ``=0`` turns it off, a ``JAX_COMPILATION_CACHE_DIR`` of your own is used as it
+is), beside the library's stored executables (``jaxmech.stored``): a second run is several
+times faster.
 
 A user's mistake (unknown scene or parameter, a bad value, a design that cannot be
 assembled) is one line on stderr and exit status 2; no traceback.
@@ -46,18 +49,24 @@ class _Parser(argparse.ArgumentParser):
 
 # --------------------------------------------------------------------------- setup
 def _setup_jax():
-    """float64; called before any array exists."""
+    """The command's own process: float64, and JAX's persistent compilation cache on (unless
+    ``JAXMECH_COMPILE_CACHE=0``, or a JAX cache the user set); called before any array exists."""
     import jax
 
+    from .cache import enable_compile_cache, switched_off
+
     jax.config.update("jax_enable_x64", True)
-    # the persistent compilation cache is switched on by `import jaxmech` (jaxmech.cache)
+    # an application may configure its process (the library never does): JAX's cache keeps
+    # what the executable store does not (plots' and tables' small programs, user outputs)
+    if not switched_off() and jax.config.jax_compilation_cache_dir is None:
+        enable_compile_cache()
 
 
 def _parser() -> _Parser:
     p = _Parser(
         prog=PROG,
         description="Planar mechanisms in JAX: run, plot, animate and sweep the built-in scenes (SI units).",
-        epilog="Compiled programs are cached in ~/.cache/jaxmech/xla (JAXMECH_COMPILE_CACHE=DIR moves it, =0 turns it off).",
+        epilog="Compiled programs are cached in ~/.cache/jaxmech (JAXMECH_COMPILE_CACHE=DIR moves it, =0 turns it off).",
     )
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
 

@@ -28,7 +28,6 @@ import numpy as np
 
 from .linalg import cond1, small_max, small_norm, solve_blocks, where
 from .xla import jit, unfused
-from .stored import cached_call
 from .mechanism import Mechanism
 from .structure import blocks
 from .implicit import attach_derivatives, implicit_root, root_derivatives
@@ -201,7 +200,7 @@ def _block_size(n: int, anchors: int) -> int:
 
 
 # --------------------------------------------------------------------------- the stroke program
-@functools.partial(jit, static_argnums=(0, 1, 2, 3))
+@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
 def _stroke_program(mech, options, derivs, single, us, p, guess):
     """Strokes of D designs: ``us (N, dof)`` shared or ``(D, N, dof)`` one per design
     (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
@@ -385,7 +384,7 @@ def _backward(mech, options, derivs, single, us, p, guess, out, n):
     q = np.asarray(out[0]).reshape(-1, nb, mech.m)
     start = np.where(need[:, None], q[np.arange(q.shape[0]), last], np.asarray(guess))
     order = np.concatenate([np.arange(n - 1, -1, -1), np.zeros(nb - n, int)])
-    back = cached_call(_stroke_program, (mech, options, derivs, single), (jax.device_put(np.take(np.asarray(us), order, axis=-2)), p, jax.device_put(start.reshape(np.shape(guess)))))
+    back = _stroke_program(mech, options, derivs, single, jax.device_put(np.take(np.asarray(us), order, axis=-2)), p, jax.device_put(start.reshape(np.shape(guess))))
     axis = 0 if single else 1
     undo = np.concatenate([np.arange(n - 1, -1, -1), np.arange(n, nb)])  # reversed index of each point
     status_b = np.asarray(back[1]).reshape(-1, nb)[:, undo][:, :n]
@@ -447,8 +446,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     nb = bucket(n)
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
-    # a new process runs the stored executable where exactly equivalent (concrete arguments)
-    out = cached_call(_stroke_program, (mech, options, bool(derivs), single), (us_, pf, gf))
+    out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf)
     if not traced:
         out = _backward(mech, options, bool(derivs), single, us_, pf, gf, out, n)
     if nb > n:

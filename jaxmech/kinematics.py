@@ -22,7 +22,6 @@ import numpy as np
 from .mechanism import Mechanism
 from .continuation import stroke
 from .inputs import as_coords, as_inputs
-from .stored import cached_call
 from .implicit import implicit_root, root_derivatives
 from .options import SolverOptions
 from .xla import jit
@@ -308,7 +307,7 @@ def join_drive(static, leaves):
     return static if leaves is None else jax.tree_util.tree_unflatten(static, leaves)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2))
+@functools.partial(jit, static_argnums=(0, 1, 2), stored=True)  # a new process loads it (jaxmech.stored)
 def _motion_eval(mech, point_names, drive_static, drive_leaves, p, t, q, d1, d2):
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, mech.dof)
@@ -369,11 +368,9 @@ def motion(
     dtype = sol.q.dtype
     pj = {k: jnp.asarray(p[k], dtype) for k in mech.params}
     static, leaves = split_drive(drive)
-    if leaves is None:
-        out = _motion_eval(mech, point_names, static, None, pj, t.astype(dtype), sol.q, e1, e2)
-    else:
+    if leaves is not None:
         leaves = [jnp.asarray(x, dtype) for x in leaves]
-        out = cached_call(_motion_eval, (mech, point_names, static), (leaves, pj, t.astype(dtype), sol.q, e1, e2))
+    out = _motion_eval(mech, point_names, static, leaves, pj, t.astype(dtype), sol.q, e1, e2)
     u, ud, udd, q, qd, qdd, d1, d2, pts = out
     return Motion(
         t=t, u=u, u_dot=ud, u_ddot=udd, q=q, q_dot=qd, q_ddot=qdd, dq_du=d1, d2q_du2=d2,

@@ -1,14 +1,23 @@
 """Stored executables: a new process runs a library program without tracing, lowering or
 compiling it.
 
-JAX's persistent compilation cache (``jaxmech.cache``) skips XLA's compile in a new process,
-but not the tracing and lowering that come before it (its key is the lowered module): for a
-scene's program those take a second or more of Python.  So the first process that runs a
-jitted library program with concrete arguments compiles it once (``lower().compile()``, the
-same executable the jitted call would build), runs it, and stores that executable
+The library's programs are jitted with ``xla.jit(..., stored=True)`` (the stroke, a point's
+kinematics, inverse dynamics, a scene's model batches); ``scenes.evaluation`` runs a scene's
+two programs through ``cached_chain``.  Their top-level calls (concrete arguments) come here:
+the first process that runs a program compiles it once (``lower().compile()``, the same
+executable the jitted call would build), runs it, and stores that executable
 (``jax.experimental.serialize_executable``) on a thread of its own, so the answer does not
-wait for the write (``wait_for_stores``; done at exit); a later process loads it and calls
-it directly.
+wait for the write (``wait_for_stores``; done at exit); a later process loads it and calls it
+directly.  Inside a trace the jitted function runs as usual: the store is consulted only at
+the edge of a computation, never inside its numerical path.
+
+The store needs no JAX setting and changes none (its folder: ``cache.executables_dir()``,
+``$XDG_CACHE_HOME/jaxmech/executables`` by default; ``JAXMECH_COMPILE_CACHE=0`` turns it off,
+``JAXMECH_EXPORT_CACHE=0`` this store only, both read at every call).  JAX's persistent
+cache is the user's: where it is on and served a program (an executable JAX loaded from its
+own cache loses kernels when serialised again, jaxlib 0.10), that program is used but not
+stored; a listener of JAX's cache-hit events is registered for the length of such a
+compile only, and only while JAX's cache is on.
 
 A stored executable is used only where it is exactly what the jitted function would run:
 
@@ -30,18 +39,15 @@ A stored executable is used only where it is exactly what the jitted function wo
   falls back to the normal jitted call.
 
 The files are pickles of compiled code, like JAX's own compilation cache: load them only
-from a folder you trust (your own cache folder, the default).
-
-Where: ``jaxmech-executables/`` inside the compilation cache folder in use (see
-``jaxmech.cache``); nothing is stored or read when that cache is off, and
-``JAXMECH_COMPILE_CACHE=0`` turns both off (``JAXMECH_EXPORT_CACHE=0``: this one only, read
-at every call).  Within a process, a program serves every later call with the same key
-(compiled once, like the jitted function it stands for).
+from a folder you trust (your own cache folder, the default).  Within a process, a program
+serves every later call with the same key (compiled once, like the jitted function it
+stands for).
 """
 
 from __future__ import annotations
 
 import atexit
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -59,7 +65,7 @@ import jax
 import jaxlib
 from jax.experimental.serialize_executable import deserialize_and_load, serialize
 
-from .cache import compile_cache_dir, switched_off
+from .cache import executables_dir
 
 __all__ = ["cached_call", "cached_chain", "cached_json", "calls_lapack", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
 
@@ -68,7 +74,6 @@ __all__ = ["cached_call", "cached_chain", "cached_json", "calls_lapack", "store_
 _STATS = {"loaded": 0, "stored": 0, "fallback": 0}
 # (folder, key) -> the compiled program that serves it in this process (None: use the jit path)
 _PROGRAMS: dict[tuple[str, str], object] = {}
-_FOLDER = "jaxmech-executables"
 _OFF = {"0", "off", "false", "no"}
 # JAX flags that change what a traced program is
 _FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
@@ -81,11 +86,11 @@ def store_stats() -> dict[str, int]:
 
 
 def store_dir() -> Path | None:
-    """The folder of stored executables, or None when it or the compilation cache is off."""
-    cache = compile_cache_dir()
-    if cache is None or switched_off() or os.environ.get("JAXMECH_EXPORT_CACHE", "1").strip().lower() in _OFF:
+    """The folder of stored executables (``cache.executables_dir()``), or None when the
+    store is off (``JAXMECH_COMPILE_CACHE=0`` or ``JAXMECH_EXPORT_CACHE=0``)."""
+    if os.environ.get("JAXMECH_EXPORT_CACHE", "1").strip().lower() in _OFF:
         return None
-    return Path(cache) / _FOLDER
+    return executables_dir()
 
 
 @functools.cache
@@ -145,14 +150,14 @@ def _treedef_ours(treedef) -> bool:
 
 
 def _key(fn, static: tuple, args: tuple) -> str | None:
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):  # inside a trace: the jit path
+        return None
     tokens = [static_token(s) for s in static]
     if any(t is None for t in tokens):
         return None
-    leaves, treedef = jax.tree_util.tree_flatten(args)
     avals = []
     for x in leaves:
-        if isinstance(x, jax.core.Tracer):
-            return None
         a = x if isinstance(x, jax.ShapeDtypeStruct) else jax.typeof(x)
         avals.append((tuple(a.shape), str(a.dtype), bool(a.weak_type)))
     flags = tuple(getattr(jax.config, f, None) for f in _FLAGS)
@@ -256,14 +261,11 @@ def wait_for_stores() -> None:
 
 # An executable that JAX loaded from its own persistent cache must not be stored again:
 # serialised a second time, it lost kernels ("Function ... not found" when run, jaxlib 0.10).
-# So a program stored here is compiled with one more XLA option whose value is drawn from
-# this module's key: ``xla_debug_buffer_assignment_show_max``, how many buffers a debug
-# listing of the buffer assignment shows (default 15), set to 2**30 and up.  The executable
-# is the same, while its entry in JAX's cache is this key's own (an edited library whose
-# program did not change is a new key: it must not meet the old key's entry).  A hit there
-# all the same (this key's own entry, whose stored file was deleted) is counted per thread,
-# and that executable is not stored.
+# JAX says so only by an event, so while JAX's cache is on (the user's choice) a listener
+# counts its hits per thread for the length of a store's compile; the last compile to end
+# removes it again.
 _HITS = threading.local()
+_LISTENERS = {"n": 0}
 
 
 def _count_hit(event: str, **_) -> None:
@@ -271,42 +273,39 @@ def _count_hit(event: str, **_) -> None:
         _HITS.n = getattr(_HITS, "n", 0) + 1
 
 
-jax.monitoring.register_event_listener(_count_hit)
-
-
-# Compiles under way here, and JAX's own threshold while there are any.
-_COMPILING = {"n": 0, "floor": 0.0}
-
-
-def _compile(fn, static: tuple, args: tuple, key: str, stored: bool = True):
-    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
-    return _compile_lowered(fn.lower(*static, *args), key, stored)
-
-
-def _compile_lowered(lowered, key: str, stored: bool = True):
-    """``(compiled, whether it may be stored)`` for a lowered program.
-
-    JAX's cache need not keep a copy of what is ``stored`` here (0.1 s of a scene's first
-    call): its threshold is raised while any such compile runs (counted, so that threads
-    compiling at once restore the user's threshold only when the last one ends).  With the
-    store off, JAX's cache keeps the program as it would any other."""
-    before = getattr(_HITS, "n", 0)
-    options = {"xla_debug_buffer_assignment_show_max": 2**30 + int(key[:6], 16)}
-    if not stored:
-        return lowered.compile(options), False
+@contextlib.contextmanager
+def _jax_cache_hits():
+    """A function giving how many programs JAX's persistent cache served on this thread
+    since entry (0 while that cache is off: then no listener is registered)."""
+    if jax.config.jax_compilation_cache_dir is None or not jax.config.jax_enable_compilation_cache:
+        yield lambda: 0
+        return
     with _LOCK:
-        if _COMPILING["n"] == 0:
-            _COMPILING["floor"] = jax.config.jax_persistent_cache_min_compile_time_secs
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
-        _COMPILING["n"] += 1
+        if _LISTENERS["n"] == 0:
+            jax.monitoring.register_event_listener(_count_hit)
+        _LISTENERS["n"] += 1
+    before = getattr(_HITS, "n", 0)
     try:
-        compiled = lowered.compile(options)
+        yield lambda: getattr(_HITS, "n", 0) - before
     finally:
         with _LOCK:
-            _COMPILING["n"] -= 1
-            if _COMPILING["n"] == 0:
-                jax.config.update("jax_persistent_cache_min_compile_time_secs", _COMPILING["floor"])
-    return compiled, getattr(_HITS, "n", 0) == before
+            _LISTENERS["n"] -= 1
+            if _LISTENERS["n"] == 0:
+                jax.monitoring.unregister_event_listener(_count_hit)
+
+
+def _compile(fn, static: tuple, args: tuple):
+    """``(compiled, whether it may be stored)``: ``fn`` lowered and compiled for these arguments."""
+    return _compile_lowered(fn.lower(*static, *args))
+
+
+def _compile_lowered(lowered):
+    """``(compiled, whether it may be stored)`` for a lowered program: compiled with the
+    options of its ``jit`` only (the executable the jitted call would build); not storable
+    when JAX's persistent cache served it."""
+    with _jax_cache_hits() as hits:
+        compiled = lowered.compile()
+        return compiled, hits() == 0
 
 
 def cached_call(fn, static: tuple, args: tuple):
@@ -325,7 +324,7 @@ def cached_call(fn, static: tuple, args: tuple):
         prog = _stored_program(folder, key)
         if prog is None:
             try:
-                prog, storable = _compile(fn, static, args, key)
+                prog, storable = _compile(fn, static, args)
             except Exception:  # e.g. inside a user's trace: the jit path serves this key
                 prog, storable = None, False
             fresh = prog if storable else None
@@ -374,7 +373,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
                 _PROGRAMS[slot1] = prog
             else:  # XLA releases the GIL while it compiles: the second is traced meanwhile
                 lowered = first.lower(*static1, *args1)
-                pending = pool.submit(_compile_lowered, lowered, key1, folder is not None)
+                pending = pool.submit(_compile_lowered, lowered)
         try:
             info = (_PROGRAMS[slot1] if pending is None else lowered).out_info
             shapes2 = args2(_shapes(info))
@@ -383,7 +382,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
             if key2 is not None and slot2 not in _PROGRAMS:
                 prog = _stored_program(folder, key2)
                 if prog is None:
-                    prog, storable = _compile(second, static2, shapes2, key2, folder is not None)
+                    prog, storable = _compile(second, static2, shapes2)
                     if storable:
                         fresh.append((key2, prog))
                 _PROGRAMS[slot2] = prog

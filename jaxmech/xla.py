@@ -16,6 +16,10 @@ the library's programs with ``COMPILER_OPTIONS``, which turn them off: a field o
 debug options that only the CPU compiler reads (not yet run on a GPU: none was lent when
 this was written).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
 statuses, derivatives and points) comes out the same either way, to rounding.
+
+``jit(..., stored=True)`` marks a program whose top-level calls (concrete arguments) go
+through the library's executable store (``jaxmech.stored``): the store wraps the compiled
+program at its edge, and the function's own module never calls it.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import functools
 
 import jax
 import jax.numpy as jnp
+
+from .stored import cached_call
 
 __all__ = ["COMPILER_OPTIONS", "jit", "unfused"]
 
@@ -35,16 +41,27 @@ __all__ = ["COMPILER_OPTIONS", "jit", "unfused"]
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
-def jit(fun=None, **kwargs):
+def jit(fun=None, *, stored: bool = False, **kwargs):
     """``jax.jit`` with ``COMPILER_OPTIONS`` where JAX allows them; usable as ``@jit``,
     ``@jit(static_argnums=...)`` or ``functools.partial(jit, static_argnums=...)``.
 
     JAX takes compiler options only on a top-level ``jit``: a call with traced arguments (the
     library inside a user's ``jit``, ``vmap`` or ``grad``) runs the plain ``jax.jit``
-    function, which the enclosing program compiles with its own options."""
+    function, which the enclosing program compiles with its own options.
+
+    ``stored``: a top-level call runs the stored executable where that is exactly equivalent
+    (``jaxmech.stored.cached_call``); the static arguments must come first
+    (``static_argnums=(0, ..., k - 1)``) and be passed by position."""
     if fun is None:
-        return functools.partial(jit, **kwargs)
-    return _Jitted(jax.jit(fun, compiler_options=COMPILER_OPTIONS, **kwargs), jax.jit(fun, **kwargs))
+        return functools.partial(jit, stored=stored, **kwargs)
+    jitted = _Jitted(jax.jit(fun, compiler_options=COMPILER_OPTIONS, **kwargs), jax.jit(fun, **kwargs))
+    if not stored:
+        return jitted
+    nums = kwargs.get("static_argnums", ())
+    nums = (nums,) if isinstance(nums, int) else tuple(nums)
+    if sorted(nums) != list(range(len(nums))) or kwargs.get("static_argnames"):
+        raise ValueError(f"jit(stored=True): static arguments must come first by position, got static_argnums={nums}")
+    return _Stored(jitted, len(nums))
 
 
 class _Jitted:
@@ -66,6 +83,24 @@ class _Jitted:
 
     def __getattr__(self, name):  # lower, trace, eval_shape...: the top-level function's
         return getattr(self._top, name)
+
+
+class _Stored:
+    """A ``_Jitted`` function whose top-level calls go through the executable store: the
+    first ``n_static`` positional arguments are its static ones."""
+
+    def __init__(self, jitted, n_static: int):
+        self._jitted, self._n_static = jitted, n_static
+        functools.update_wrapper(self, jitted)
+
+    def __call__(self, *args, **kwargs):
+        if kwargs:  # the store keys positional arguments only
+            return self._jitted(*args, **kwargs)
+        # under a trace cached_call finds a tracer in the key and calls the jitted function
+        return cached_call(self._jitted, args[: self._n_static], args[self._n_static:])
+
+    def __getattr__(self, name):
+        return getattr(self._jitted, name)
 
 
 def _on_cpu() -> bool:

@@ -14,7 +14,9 @@ jax.config.update("jax_enable_x64", True)
 # notebook subprocesses share compiled kernels through JAX's persistent cache.
 _CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(tempfile.gettempdir(), "jaxmech-test-xla-cache"))
 jax.config.update("jax_compilation_cache_dir", _CACHE)
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # as the library (jaxmech.cache)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # as jaxmech.enable_compile_cache
+# The library's stored executables (jaxmech.stored) likewise, out of the home folder.
+os.environ.setdefault("JAXMECH_COMPILE_CACHE", os.path.join(tempfile.gettempdir(), "jaxmech-test-store"))
 
 # The worked studies live in examples/ at the repository root (not in the package): make
 # ``import examples`` work from any working directory, relative to this file.

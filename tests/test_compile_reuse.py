@@ -1,5 +1,6 @@
 """Compiled code is reused when nothing structural changed (an identical mechanism rebuilt,
-a stroke one point longer), and the persistent compilation cache follows its switches."""
+a stroke one point longer); stored executables carry programs to a new process, with JAX's
+persistent cache off (the default) or on (the user's)."""
 
 import json
 import os
@@ -63,84 +64,100 @@ def test_identical_mechanisms_are_equal_and_share_compiled_code():
     np.testing.assert_allclose(np.asarray(longer[0].q[-1]), np.asarray(first[0].q[-1]), atol=1e-12)
 
 
-def _cache_dir_seen(env):
-    code = "import jax, jaxmech; print(jax.config.jax_compilation_cache_dir)"
+def _seen(env, code="import jax, jaxmech; from jaxmech.stored import store_dir; print(jax.config.jax_compilation_cache_dir, store_dir())"):
     env = {k: v for k, v in {**os.environ, **env}.items() if v is not None}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr
-    return out.stdout.strip()
+    return out.stdout.strip().split()
 
 
-def test_persistent_cache_switches(tmp_path):
-    base = {"JAX_COMPILATION_CACHE_DIR": None, "PYTHONPATH": str(ROOT)}
-    assert _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": "0"}) == "None"
-    assert _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": str(tmp_path / "here")}) == str(tmp_path / "here")
-    assert (tmp_path / "here").is_dir()
-    theirs = str(tmp_path / "theirs")
-    assert _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": None, "JAX_COMPILATION_CACHE_DIR": theirs}) == theirs
-    home = _cache_dir_seen({**base, "JAXMECH_COMPILE_CACHE": None, "XDG_CACHE_HOME": str(tmp_path / "xdg")})
-    assert home == str(tmp_path / "xdg" / "jaxmech" / "xla")
+def test_cache_switches(tmp_path):
+    """``import jaxmech`` switches no JAX cache on; the store's folder follows
+    ``JAXMECH_COMPILE_CACHE`` and ``XDG_CACHE_HOME``; ``enable_compile_cache`` is the opt-in."""
+    base = {"JAX_COMPILATION_CACHE_DIR": None, "JAXMECH_EXPORT_CACHE": None, "PYTHONPATH": str(ROOT)}
+    assert _seen({**base, "JAXMECH_COMPILE_CACHE": "0"}) == ["None", "None"]
+    here = tmp_path / "here"
+    assert _seen({**base, "JAXMECH_COMPILE_CACHE": str(here)}) == ["None", str(here / "executables")]
+    theirs = str(tmp_path / "theirs")  # JAX's own variable: theirs, and the store is still ours
+    xdg = tmp_path / "xdg"
+    assert _seen({**base, "JAXMECH_COMPILE_CACHE": None, "JAX_COMPILATION_CACHE_DIR": theirs, "XDG_CACHE_HOME": str(xdg)}) == [
+        theirs, str(xdg / "jaxmech" / "executables")]  # fmt: skip
+    assert _seen({**base, "JAXMECH_COMPILE_CACHE": None, "XDG_CACHE_HOME": str(xdg)}) == [
+        "None", str(xdg / "jaxmech" / "executables")]  # fmt: skip
+    opt_in = "import jax, jaxmech; print(jaxmech.enable_compile_cache(), jax.config.jax_compilation_cache_dir)"
+    assert _seen({**base, "JAXMECH_COMPILE_CACHE": None, "XDG_CACHE_HOME": str(xdg)}, opt_in) == [str(xdg / "jaxmech" / "xla")] * 2
+    assert (xdg / "jaxmech" / "xla").is_dir()
 
 
 _NEW_PROCESS = """
 import json, sys
 import jax
 jax.config.update("jax_enable_x64", True)
+if sys.argv[3] != "-":
+    jax.config.update("jax_compilation_cache_dir", sys.argv[3])  # the user's own JAX cache
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 import numpy as np
 import jaxmech as jm
-from jaxmech.stored import store_stats
+from jaxmech.stored import store_stats, wait_for_stores
 sys.path.insert(0, sys.argv[2])
 from test_compile_reuse import P, fourbar
 sol, d1, d2 = jm.stroke_kinematics(fourbar(), np.linspace(0.0, 2 * np.pi, 361), P, np.array([0.4, 1.7]))
 np.savez(sys.argv[1], q=sol.q, status=sol.status, d1=d1, d2=d2)
+wait_for_stores()  # written on a thread of their own
 print(json.dumps(store_stats()))
 """
 
 
+def _new_process(out: Path, store: Path, jax_cache="-", script=_NEW_PROCESS):
+    """``script`` in a fresh interpreter with its store in ``store`` (JAX's cache: off, or
+    ``jax_cache`` switched on by the script as a user would); its store counts."""
+    env = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR", "JAXMECH_EXPORT_CACHE")}
+    env.update(JAXMECH_COMPILE_CACHE=str(store), PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", script, str(out), str(Path(__file__).parent), str(jax_cache)],
+                          env=env, capture_output=True, text=True, timeout=300, cwd=ROOT)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _same_bits(path, res):
+    r = np.load(path)
+    sol, d1, d2 = res
+    for name, mine in (("q", sol.q), ("status", sol.status), ("d1", d1), ("d2", d2)):
+        np.testing.assert_array_equal(r[name], np.asarray(mine), err_msg=name)
+
+
 def test_a_new_process_runs_the_stored_program_bit_for_bit(tmp_path, monkeypatch):
-    """A second process loads the stored stroke executable (no tracing) and gives the same
-    bits as the first process and as the plain jitted program."""
-    from jaxmech.stored import store_dir, wait_for_stores
-
+    """A first process (JAX's cache off: the default) compiles and stores the stroke
+    executable; a second loads it (no tracing); both give the bits of the plain jitted
+    program."""
     us, g = np.linspace(0.0, 2 * np.pi, 361), np.array([0.4, 1.7])
-    assert store_dir() is not None  # the suite runs with the compilation cache on
-    first = jm.stroke_kinematics(fourbar(), us, P, g)  # stored (or loaded) by this process
-    wait_for_stores()  # written on a thread of their own
     monkeypatch.setenv("JAXMECH_EXPORT_CACHE", "0")
-    plain = jm.stroke_kinematics(fourbar(), us, P, g)  # traced and jitted as without the cache
-    monkeypatch.delenv("JAXMECH_EXPORT_CACHE")
-    out = subprocess.run([sys.executable, "-c", _NEW_PROCESS, str(tmp_path / "r.npz"), str(Path(__file__).parent)],
-                         capture_output=True, text=True, timeout=300, cwd=ROOT)  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    stats = json.loads(out.stdout.strip().splitlines()[-1])
-    assert stats["loaded"] >= 1 and stats["stored"] == 0, stats
-    r = np.load(tmp_path / "r.npz")
-    for res in (first, plain):
-        sol, d1, d2 = res
-        for name, mine in (("q", sol.q), ("status", sol.status), ("d1", d1), ("d2", d2)):
-            np.testing.assert_array_equal(r[name], np.asarray(mine), err_msg=name)
-    assert np.all(np.asarray(first[0].ok))
+    plain = jm.stroke_kinematics(fourbar(), us, P, g)  # traced and jitted as without the store
+    first = _new_process(tmp_path / "1.npz", tmp_path / "store")
+    second = _new_process(tmp_path / "2.npz", tmp_path / "store")
+    assert first["stored"] >= 1 and first["loaded"] == 0, first
+    assert second["loaded"] >= 1 and second["stored"] == 0, second
+    for f in ("1.npz", "2.npz"):
+        _same_bits(tmp_path / f, plain)
+    assert np.all(np.asarray(plain[0].ok))
 
 
-def test_an_edited_library_compiles_and_stores_its_program_anew(monkeypatch):
-    """A new key for a program JAX's cache holds under an old key (an edited jaxmech whose
-    stroke program did not change) is compiled and stored anew: an executable that JAX
-    loaded from its own cache cannot be stored again (its kernels went missing when run)."""
-    import uuid
-
-    from jaxmech import stored
-
+def test_a_program_from_the_users_jax_cache_is_used_and_not_stored(tmp_path, monkeypatch):
+    """With the user's JAX cache on, a program compiled anew is stored (and kept by JAX); one
+    that JAX's cache served (a new store: an edited library whose stroke program did not
+    change) runs, and is not stored: an executable JAX loaded from its cache, serialised
+    again, loses kernels (jaxlib 0.10)."""
     us, g = np.linspace(0.0, 2 * np.pi, 361), np.array([0.4, 1.7])
-    old = jm.stroke_kinematics(fourbar(), us, P, g)  # under the suite's key: stored or loaded
-    monkeypatch.setattr(stored, "source_hash", lambda: f"an edited library {uuid.uuid4().hex}")
-    before = stored.store_stats()["stored"]
-    threshold = jax.config.jax_persistent_cache_min_compile_time_secs
-    new = jm.stroke_kinematics(fourbar(), us, P, g)
-    stored.wait_for_stores()
-    assert stored.store_stats()["stored"] == before + 1
-    # JAX's cache kept no copy of it, and its threshold is the user's again
-    assert jax.config.jax_persistent_cache_min_compile_time_secs == threshold
-    np.testing.assert_array_equal(np.asarray(new[0].q), np.asarray(old[0].q))
+    monkeypatch.setenv("JAXMECH_EXPORT_CACHE", "0")
+    plain = jm.stroke_kinematics(fourbar(), us, P, g)
+    jax_cache = tmp_path / "jax-cache"
+    compiled = _new_process(tmp_path / "1.npz", tmp_path / "store1", jax_cache)
+    served = _new_process(tmp_path / "2.npz", tmp_path / "store2", jax_cache)
+    assert compiled["stored"] >= 1, compiled
+    assert served["stored"] == 0 and served["loaded"] == 0, served
+    assert not (tmp_path / "store2" / "executables").exists() or not any((tmp_path / "store2" / "executables").glob("*.jaxexec"))
+    for f in ("1.npz", "2.npz"):
+        _same_bits(tmp_path / f, plain)
 
 
 _NEW_SCENE_PROCESS = """
@@ -149,35 +166,31 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 from jaxmech.scenes import get_scene, run_scene
-from jaxmech.stored import store_stats
+from jaxmech.stored import store_stats, wait_for_stores
 table = run_scene(get_scene("sma_flap"), 101).table()
 np.savez(sys.argv[1], **{str(i): np.asarray(v) for i, v in enumerate(table.values())})
+wait_for_stores()
 print(json.dumps(store_stats()))
 """
 
 
 def test_a_new_process_runs_a_scenes_two_stored_programs_bit_for_bit(tmp_path, monkeypatch):
     """``run_scene``'s two programs (the stroke, then kinematics and outputs, compiled at once
-    on two threads) are stored; a new process loads both and gives the same table, bit for
-    bit, as this process and as the two programs compiled without the store."""
+    on two threads) are stored by a first process; a second loads both and gives the same
+    table, bit for bit, as the two programs compiled without the store."""
     from jaxmech.scenes import get_scene, run_scene
-    from jaxmech.stored import wait_for_stores
 
-    first = run_scene(get_scene("sma_flap"), 101).table()
-    wait_for_stores()
     monkeypatch.setenv("JAXMECH_EXPORT_CACHE", "0")
     plain = run_scene(get_scene("sma_flap"), 101).table()  # compiled for this process only
-    monkeypatch.delenv("JAXMECH_EXPORT_CACHE")
-    out = subprocess.run([sys.executable, "-c", _NEW_SCENE_PROCESS, str(tmp_path / "t.npz")],
-                         capture_output=True, text=True, timeout=300, cwd=ROOT)  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    stats = json.loads(out.stdout.strip().splitlines()[-1])
-    assert stats["loaded"] >= 2 and stats["stored"] == 0, stats
-    r = np.load(tmp_path / "t.npz")
-    assert len(r.files) == len(first) == len(plain)
-    for i, name in enumerate(first):
-        np.testing.assert_array_equal(r[str(i)], np.asarray(first[name]), err_msg=name)
-        np.testing.assert_array_equal(np.asarray(plain[name]), np.asarray(first[name]), err_msg=name)
+    first = _new_process(tmp_path / "1.npz", tmp_path / "store", script=_NEW_SCENE_PROCESS)
+    second = _new_process(tmp_path / "2.npz", tmp_path / "store", script=_NEW_SCENE_PROCESS)
+    assert first["stored"] >= 2, first
+    assert second["loaded"] >= 2 and second["stored"] == 0, second
+    for f in ("1.npz", "2.npz"):
+        r = np.load(tmp_path / f)
+        assert len(r.files) == len(plain)
+        for i, name in enumerate(plain):
+            np.testing.assert_array_equal(r[str(i)], np.asarray(plain[name]), err_msg=name)
 
 
 def _watt(shift=0.0, scale=1.0):
@@ -221,7 +234,7 @@ def test_a_program_that_calls_lapack_is_not_stored():
     assert stored.calls_lapack(jax.jit(jnp.linalg.solve).lower(a, b).compile())
     assert not stored.calls_lapack(jax.jit(jnp.matmul).lower(a, b).compile())
     # programs of their own, new to every cache (a constant drawn per run): compiled here,
-    # through the store, not found in JAX's persistent cache
+    # through the store, not found in the suite's JAX cache
     k = float(np.random.default_rng().uniform(1.0, 2.0))  # static: part of the store's key
 
     def scaled_solve(k, a, b):  # the store keys a program by its function's name
@@ -252,3 +265,17 @@ def test_determinants_without_lapack_match_numpy():
             assert abs(float(det_small(jnp.asarray(a))) - np.linalg.det(a)) <= 1e-12 * max(1.0, abs(np.linalg.det(a)))
     swap = np.array([[0.0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])  # needs a pivot
     assert float(det_small(jnp.asarray(swap))) == -1.0
+
+
+def test_enable_default_cache_is_deprecated_and_respects_the_switch(monkeypatch):
+    """The old import-time switch still works when called, with a DeprecationWarning that
+    names its replacement; switched off, it changes nothing."""
+    import pytest
+
+    from jaxmech.cache import enable_default_cache
+
+    monkeypatch.setenv("JAXMECH_COMPILE_CACHE", "0")
+    before = dict(jax.config.values)
+    with pytest.warns(DeprecationWarning, match="enable_compile_cache"):
+        enable_default_cache()
+    assert dict(jax.config.values) == before

@@ -21,7 +21,6 @@ from ..kinematics import chain_rule, drive_rates, drive_samples, join_drive, poi
 from ..options import SolverOptions
 from ..positions import solve_one
 from ..status import Status
-from ..stored import cached_call
 from ..xla import jit
 from .model import Model, mechanism_params, prepare_params
 from .reactions import joint_reactions
@@ -171,7 +170,7 @@ def statics(model: Model, u, p: Mapping, guess, *, t=0.0, options: SolverOptions
     return inverse_dynamics_at(model, u, zero, zero, p, guess, t=t, quasi_static=True, options=options)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3))
+@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
 def _along(model, quasi_static, names, drive_static, drive_leaves, p, t, q, d1, d2):
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, model.mechanism.dof)
@@ -209,7 +208,5 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     static, leaves = split_drive(drive)
     if leaves is not None:
         leaves = [jnp.asarray(x, dtype) for x in leaves]
-    # a new process runs the stored executable where exactly equivalent (concrete arguments)
-    u, ud, udd, out = cached_call(_along, (model, bool(quasi_static), tuple(mech.points), static),
-                                  (leaves, pj, t.astype(dtype), sol.q, d1, d2))
+    u, ud, udd, out = _along(model, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype), sol.q, d1, d2)
     return _result(mech, t, u, ud, udd, dict(out, q=sol.q, status=sol.status))

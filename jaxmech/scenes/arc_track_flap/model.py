@@ -13,7 +13,6 @@ import numpy as np
 
 from ...actuators import ScrewJack
 from ...dynamics import Body, Gravity, Model, Moment, generalized_forces
-from ...stored import cached_call
 from ...mechanism import Mechanism, cis
 from ..base import Scene
 from ...xla import jit
@@ -321,7 +320,7 @@ def quasi_static_one(q, u, p):
                 F34y=jnp.imag(jnp.conj(e_s) * F42), lam=lam)
 
 
-@jit
+@functools.partial(jit, stored=True)  # a new process loads it (jaxmech.stored)
 def _quasi_static_batch(q, u, p):
     return jax.vmap(lambda q_, u_: quasi_static_one(q_, u_, p))(q, u)
 
@@ -336,7 +335,7 @@ def quasi_static(q, u, p: Mapping) -> dict:
     """
     q, u = jnp.asarray(q), jnp.asarray(u)
     pj = {k: jnp.asarray(p[k], q.dtype) for k in PARAM_NAMES}
-    return cached_call(_quasi_static_batch, (), (q, u, pj))  # a new process skips tracing (jaxmech.stored)
+    return _quasi_static_batch(q, u, pj)
 
 
 def _outputs(p, mo):

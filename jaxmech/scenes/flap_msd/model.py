@@ -14,7 +14,6 @@ from ...actuators import DCMotor
 from ...dynamics import Body, Gravity, Model, Moment, PointForce, generalized_forces
 from ...kinematics import Motion, chain_rule
 from ...mechanism import Mechanism, cis
-from ...stored import cached_call
 from ..base import Scene
 from ...xla import jit
 
@@ -271,7 +270,7 @@ MODEL = Model(
 MOTOR = DCMotor(resistance="R_a", constant="K_m")
 
 
-@jit
+@functools.partial(jit, stored=True)  # a new process loads it (jaxmech.stored)
 def _torque_batch(p, q, u, ud, udd, t, d1, d2):
     def one(q_, u_, ud_, udd_, t_, d1_, d2_):
         qd, qdd = chain_rule(d1_, d2_, ud_, udd_)  # this drive's rates from dq/du, d2q/du2
@@ -291,7 +290,7 @@ def torque(p: Mapping, motion: Motion):
     dt = motion.q.dtype
     pj = {k: jnp.asarray(v, dt) for k, v in p.items()}
     args = (pj, motion.q, motion.u, motion.u_dot, motion.u_ddot, jnp.asarray(motion.t, dt), motion.dq_du, motion.d2q_du2)
-    return cached_call(_torque_batch, (), args)  # a new process skips tracing (jaxmech.stored)
+    return _torque_batch(*args)
 
 
 def voltage(p: Mapping, motion: Motion, torque_values=None):
