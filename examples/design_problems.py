@@ -37,7 +37,7 @@ import optax
 
 from jaxmech.design import FitResult, fit, peak, scene_figure
 from jaxmech.dynamics import Body, Gravity, Model, Moment, generalized_forces
-from jaxmech.scenes.base import Scene
+from jaxmech.scenes import Outputs, Scene
 from jaxmech.sweep import design_columns
 
 __all__ = [
@@ -77,14 +77,14 @@ def _flap_torque(p, mo):
     # no reverse pass inside the objective's own gradient.
     from jaxmech.scenes.flap_msd import torque_document
 
-    return {"torque": (torque_document(p, mo, corrected=True), "N m")}
+    return {"torque": torque_document(p, mo, corrected=True)}
 
 
 @functools.cache
 def _flap_scene() -> Scene:
     from jaxmech.scenes.flap_msd import SCENE
 
-    return _lean(SCENE, _flap_torque)
+    return _lean(SCENE, Outputs(_flap_torque, {"torque": "N m"}))
 
 
 # =========================================================================== 1. flap_msd
@@ -646,7 +646,7 @@ def _loaded_fourbar():
         pj = dict(p)
         tau = jax.vmap(lambda q, u, ud, udd, t: generalized_forces(model, q, u, ud, udd, pj, t)[0][0])(
             mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.t)
-        return {"torque": (tau, "N m")}
+        return {"torque": tau}
 
     scene = Scene(
         name="loaded_fourbar",
@@ -657,7 +657,7 @@ def _loaded_fourbar():
         stroke=lambda p: (0.0, 2 * jnp.pi),
         speed=2 * np.pi,
         units={"theta2": "rad", "theta3": "rad", "theta4": "rad"},
-        outputs=outputs,
+        outputs=Outputs(outputs, {"torque": "N m"}),
     )
     return scene, model
 

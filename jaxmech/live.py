@@ -28,6 +28,7 @@ from matplotlib.figure import Figure
 
 from .drawing import Drawer, new_figure
 from .scenes import Scene, SceneResult, get_scene
+from .scenes.outputs import output_units
 from .status import Status, status_counts
 from .sweep import design_motion
 from .units import for_reading
@@ -35,15 +36,10 @@ from .xla import jit
 
 __all__ = ["LiveView", "live_view", "update", "sliders", "evaluate"]
 
-# The outputs' units (strings cannot leave a compiled program), recorded when it is traced.
-_OUTPUT_UNITS: dict = {}
-
-
 @functools.partial(jit, static_argnums=(0, 1))
 def _evaluate(scene: Scene, points: int, p):
     mo, ok = design_motion(scene, points, p)
     outs = scene.outputs(p, mo) if scene.outputs is not None else {}
-    _OUTPUT_UNITS[scene.name] = {k: unit for k, (_, unit) in outs.items()}
 
     def nan(x):  # failed samples: NaN for drawing, as run_scene gives them
         return jnp.where(jnp.reshape(ok, (-1,) + (1,) * (x.ndim - 1)), x, jnp.nan)
@@ -71,7 +67,7 @@ def evaluate(scene: Scene, points: int, params: Mapping) -> SceneResult:
         raise ValueError(f"scene {scene.name!r} cannot be assembled over its stroke with these parameters: {bad.size} "
                          f"of {points} positions fail, first at {uname} = {u:.6g} {unit} ({status_counts(status)}); "
                          f"change the link lengths or the stroke")
-    units = _OUTPUT_UNITS[scene.name]
+    units = output_units(scene)  # strings cannot leave the compiled program
     return SceneResult(scene=scene, params=p, motion=mo, outputs={k: (v, units[k]) for k, v in outs.items()})
 
 

@@ -18,7 +18,7 @@ from ..options import SolverOptions
 from ..scenes.base import Scene
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..status import Status
-from ..sweep import design_columns
+from ..scenes.columns import design_columns
 
 __all__ = ["SceneFigure", "as_batch", "figure_value", "peak", "scene_figure"]
 

@@ -1,6 +1,7 @@
 """Scene registry: ``get_scene(name)``, ``scene_names()``.
 
-Each scene lives in its own module, imported on first use.
+Each scene lives in its own module, imported on first use, and declares its outputs' units
+and column order (``Outputs``).
 """
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import importlib
 
 from .base import Scene as Scene
+from .outputs import Outputs as Outputs
 from .base import SceneResult as SceneResult
 from .base import run_scene as run_scene
 

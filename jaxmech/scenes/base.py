@@ -35,8 +35,11 @@ class Scene:
     - `speed`: magnitude of the default constant drive speed (rad/s or m/s); the time
       derivatives ``_dot``/``_ddot`` in reports are under this drive.
     - `units`: unit string for every coordinate and input (``"rad"``, ``"m"``).
-    - `outputs`: optional ``(p, motion) -> {name: (values (N,), unit)}`` extra outputs
-      (torque, voltage, reactions...).
+    - `outputs`: optional extra outputs (torque, voltage, reactions...) of one design,
+      declared: ``Outputs(fn, {name: unit, ...})`` with ``fn(p, motion) -> {name: values
+      (N,)}``, the units in the order the table shows them; or a plain function
+      ``(p, motion) -> {name: (values (N,), unit)}``, whose names and units are then found
+      once by tracing it (``scenes.outputs``).
     - `validate`: optional ``p -> None`` raising ``ValueError`` that says what to change.
     - `plots`: optional ``(result, outdir) -> list of PNG paths``.
     - `drawing`: optional ``p -> dict`` describing how to draw the mechanism from its named

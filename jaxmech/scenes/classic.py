@@ -7,6 +7,7 @@ import numpy as np
 
 from ..mechanism import Mechanism, cis
 from .base import Scene
+from .outputs import Outputs
 
 __all__ = ["FOURBAR", "SLIDER_CRANK", "FOURBAR_PARAMETERS", "SLIDER_CRANK_PARAMETERS", "fourbar_mechanism", "slider_crank_mechanism"]
 
@@ -81,7 +82,7 @@ def _slider_crank_drawing(p):
 def _transmission(p, mo):
     th3, th4 = mo.q[:, 0], mo.q[:, 1]
     mu = jnp.arccos(jnp.abs(jnp.cos(th4 - th3)))
-    return {"transmission_angle": (mu, "rad")}
+    return {"transmission_angle": mu}
 
 
 #: Parameters of the four-bar scene: (SI unit, meaning).
@@ -108,7 +109,7 @@ FOURBAR = Scene(
     stroke=lambda p: (0.0, 2 * jnp.pi),
     speed=1.0,
     units={"theta2": "rad", "theta3": "rad", "theta4": "rad"},
-    outputs=_transmission,
+    outputs=Outputs(_transmission, {"transmission_angle": "rad"}),
     drawing=_fourbar_drawing,
     parameters=FOURBAR_PARAMETERS,
 )

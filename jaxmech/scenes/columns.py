@@ -1,8 +1,12 @@
-"""The columns of a scene's table, one function for every path: ``SceneResult.table``
-(``run_scene``), the sweep kernels and ``jaxmech.design`` all name and order them here.
+"""The columns of a scene's table, one naming for every path: ``SceneResult.table``
+(``run_scene``), the sweep kernels (trace and figures), their CSV and Parquet writers, and
+``jaxmech.design`` all name and order them here; and the traceable evaluations of one
+design, or a batch, as those columns (``design_columns``, ``batch_columns``: what
+``jaxmech.design`` differentiates and the sweep kernels vmap).
 
 Column names are ``NAME[UNIT]`` (SI): time, the input with its rates, every coordinate
-with ``_dot``/``_ddot``, the scene's outputs; ``status[-]`` is added by the callers.
+with ``_dot``/``_ddot``, the scene's outputs in the order and units of
+``outputs.output_units``; ``status[-]`` is added by the callers.
 """
 
 from __future__ import annotations
@@ -10,34 +14,57 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
+import jax
 import jax.numpy as jnp
 
+from ..options import SolverOptions
 from ..status import Status
+from .evaluation import SCENE_OPTIONS, motion_and_outputs, scene_motion
+from .outputs import output_units
 
-if TYPE_CHECKING:  # a Scene is only read here (its mechanism, units)
+if TYPE_CHECKING:  # a Scene is only read here (its mechanism, units, outputs)
     from ..kinematics import Motion
     from .base import Scene
 
-__all__ = ["table_columns", "is_drive_column", "mask_failed"]
+__all__ = [
+    "batch_columns",
+    "column_names",
+    "design_columns",
+    "design_motion",
+    "design_status",
+    "is_drive_column",
+    "mask_failed",
+    "table_columns",
+]
+
+
+def _names(scene: Scene, out_units: Mapping[str, str]) -> list[str]:
+    """Every column name, in table order, for outputs ``{name: unit}``."""
+    uname = scene.mechanism.inputs[0]
+    uu = scene.units[uname]
+    names = ["t[s]", f"{uname}[{uu}]", f"{uname}_dot[{uu}/s]", f"{uname}_ddot[{uu}/s^2]"]
+    for n in scene.mechanism.coords:
+        un = scene.units[n]
+        names += [f"{n}[{un}]", f"{n}_dot[{un}/s]", f"{n}_ddot[{un}/s^2]"]
+    return names + [f"{n}[{unit}]" for n, unit in out_units.items()]
+
+
+def column_names(scene: Scene) -> list[str]:
+    """The names ``NAME[UNIT]`` of ``SceneResult.table``'s columns (status excepted), in
+    order, from the scene's declaration alone (nothing is evaluated)."""
+    return _names(scene, output_units(scene))
 
 
 def table_columns(scene: Scene, mo: Motion, outputs: Mapping | None, xp=jnp) -> dict:
-    """Columns ``NAME[UNIT]`` of ``SceneResult.table`` (without status), unmasked; `xp` is
+    """Columns ``NAME[UNIT]`` of ``SceneResult.table`` (without status), unmasked, from a
+    motion and the outputs ``{name: (values, unit)}`` (in column order); `xp` is
     ``jax.numpy`` (traced) or ``numpy`` (outputs evaluated design by design)."""
-    cols = {"t[s]": mo.t}
-    uname = scene.mechanism.inputs[0]
-    uu = scene.units[uname]
-    cols[f"{uname}[{uu}]"] = mo.u[..., 0]
-    cols[f"{uname}_dot[{uu}/s]"] = mo.u_dot[..., 0]
-    cols[f"{uname}_ddot[{uu}/s^2]"] = mo.u_ddot[..., 0]
-    for i, n in enumerate(scene.mechanism.coords):
-        un = scene.units[n]
-        cols[f"{n}[{un}]"] = mo.q[..., i]
-        cols[f"{n}_dot[{un}/s]"] = mo.q_dot[..., i]
-        cols[f"{n}_ddot[{un}/s^2]"] = mo.q_ddot[..., i]
-    for n, (v, unit) in (outputs or {}).items():
-        cols[f"{n}[{unit}]"] = xp.broadcast_to(xp.asarray(v), mo.t.shape)
-    return cols
+    outputs = outputs or {}
+    values = [mo.t, mo.u[..., 0], mo.u_dot[..., 0], mo.u_ddot[..., 0]]
+    for i in range(len(scene.mechanism.coords)):
+        values += [mo.q[..., i], mo.q_dot[..., i], mo.q_ddot[..., i]]
+    values += [xp.broadcast_to(xp.asarray(v), mo.t.shape) for v, _ in outputs.values()]
+    return dict(zip(_names(scene, {k: unit for k, (_, unit) in outputs.items()}), values))
 
 
 def is_drive_column(scene: Scene, name: str) -> bool:
@@ -51,3 +78,50 @@ def mask_failed(scene: Scene, cols: dict, status, xp=jnp) -> dict:
     """``cols`` with NaN at the samples that did not converge (drive columns kept)."""
     ok = status == Status.CONVERGED
     return {k: v if is_drive_column(scene, k) else xp.where(ok, v, xp.nan) for k, v in cols.items()}
+
+
+def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = SCENE_OPTIONS):
+    """One design's ``Motion`` over its stroke, traceable (works under ``jit``/``vmap``/``grad``):
+    ``evaluation.scene_motion`` for a batch of one.
+
+    **Arguments**
+
+    - `scene`: the scene; `points`: samples along the stroke (both ends included).
+    - `p`: ``{name: scalar}``, every parameter of the scene (SI units).
+
+    **Returns** ``(motion, ok)``: a ``Motion`` with ``N = points`` samples (finite
+    placeholders at failed samples, as ``scene_motion`` says) and the boolean ``(N,)`` mask
+    of converged samples.
+    """
+    mo, ok = scene_motion(scene, points, {k: jnp.asarray(v)[None] for k, v in p.items()}, options)
+    return jax.tree_util.tree_map(lambda x: x[0], mo), ok[0]
+
+
+def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SCENE_OPTIONS):
+    """One design's table columns, traceable: ``({NAME[UNIT]: (N,)}, status (N,))``.
+
+    Columns are those of ``SceneResult.table`` (without ``status[-]``), and at failed
+    samples they hold finite placeholders (see ``design_motion``): mask them with the
+    status.  Used by ``jaxmech.design.scene_figure``.
+    """
+    cols, status = batch_columns(scene, points, {k: jnp.asarray(v)[None] for k, v in p.items()}, options)
+    return {k: v[0] for k, v in cols.items()}, status[0]
+
+
+def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+    """The table columns of D designs (``p`` leaves ``(D,)``), traceable: ``({NAME[UNIT]:
+    (D, N)}, status (D, N))``, unmasked (finite placeholders at failed samples), from
+    ``motion_and_outputs``: the sweep kernels' columns, and ``run_scene``'s."""
+    mo, values = motion_and_outputs(scene, points, options, scene.outputs is not None, p)
+    units = output_units(scene) if values else {}
+    return table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}), mo.status
+
+
+def design_status(status, xp=jnp):
+    """A design's status from its samples' ``(..., N)``: ``CONVERGED`` when every sample
+    converged, else the status of the first sample along the stroke that did not (where
+    the design broke).  Returns ``(...,)`` int32."""
+    bad = status != Status.CONVERGED
+    first = xp.argmax(bad, axis=-1)
+    code = xp.take_along_axis(status, first[..., None], axis=-1)[..., 0]
+    return xp.where(xp.any(bad, axis=-1), code, int(Status.CONVERGED)).astype(xp.int32)

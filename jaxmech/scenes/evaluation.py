@@ -16,20 +16,23 @@ rounds differently: sma_flap's accelerations moved by an ulp).
 from __future__ import annotations
 
 import functools
-import weakref
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from ..continuation import stroke
-from ..stored import cached_chain, cached_json
+from ..stored import cached_chain
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
 from ..options import SolverOptions
+from ..solution import Solution
 from ..status import Status
 from ..xla import jit
+from .outputs import run_outputs
+from .outputs import output_units as scene_output_units
 
-__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "scene_stroke", "scene_kinematics", "scene_outputs", "stroke_stage", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
+__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "scene_outputs", "stroke_stage", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
 
 #: Solver options of a scene's stroke wherever it is evaluated (``run_scene``, sweeps,
 #: design, the live view) unless the caller gives its own: 256 anchors.
@@ -67,30 +70,43 @@ def _as_dtype(scene, p):
     return {k: jnp.asarray(p[k], dtype) for k in scene.mechanism.params}, dtype
 
 
-def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+class StrokePart(NamedTuple):
+    """``scene_stroke``'s result, ``(D, ...)`` in front of every field: each design's
+    `drive` (``ConstantSpeed``), sample times `t` ``(D, N)`` in s, stroke-start `guess`
+    ``(D, m)``, the stroke's ``Solution`` `solution` ``(D, N)``, and the per-unit-input
+    derivatives `dq_du` ``(D, N, m, dof)`` and `d2q_du2` ``(D, N, m, dof, dof)``."""
+
+    drive: ConstantSpeed
+    t: jax.Array
+    guess: jax.Array
+    solution: Solution
+    dq_du: jax.Array
+    d2q_du2: jax.Array
+
+
+def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS) -> StrokePart:
     """The first half of ``scene_motion``: every design's drive, sample times, guess and
-    stroke solution, ``(drive, t, guess, solution, dq/du, d2q/du2)`` with ``(D, ...)`` in
-    front (``scene_kinematics`` takes it)."""
+    stroke solution with its input derivatives, a ``StrokePart`` (``scene_kinematics``
+    takes it)."""
     mech = scene.mechanism
     p, dtype = _as_dtype(scene, p)
 
     def setup(p1):
         drive, duration = stroke_drive(scene, p1, dtype)
-        t = jnp.linspace(0.0, duration, points)
-        us = jnp.reshape(jax.vmap(drive)(t), (points, mech.dof))
-        return drive, t, us, jnp.asarray(scene.guess(p1), dtype)
+        return drive, jnp.linspace(0.0, duration, points), jnp.asarray(scene.guess(p1), dtype)
 
-    drive, t, us, guess = jax.vmap(setup)(p)
+    drive, t, guess = jax.vmap(setup)(p)
+    us = jax.vmap(lambda d, t1: jnp.reshape(jax.vmap(d)(t1), (points, mech.dof)))(drive, t)
     # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
     sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, per_design=True)
-    return drive, t, guess, sol, e1, e2
+    return StrokePart(drive, t, guess, sol, e1, e2)
 
 
-def scene_kinematics(scene, points: int, p, part):
+def scene_kinematics(scene, points: int, p, part: StrokePart):
     """The second half of ``scene_motion``: ``(motion, ok)`` from ``scene_stroke``'s ``part``."""
     mech = scene.mechanism
     p, _ = _as_dtype(scene, p)
-    drive, t, guess, sol, e1, e2 = part
+    drive, t, guess, sol, e1, e2 = part.drive, part.t, part.guess, part.solution, part.dq_du, part.d2q_du2
     ok = sol.status == Status.CONVERGED
     # Mask the *inputs* of everything downstream: no NaN, not even in a branch not taken
     # (failed samples have zero derivatives).
@@ -116,11 +132,11 @@ def scene_kinematics(scene, points: int, p, part):
 
 def scene_outputs(scene, p, mo: Motion) -> dict:
     """The scene's outputs for every design of a ``scene_motion``: ``{name: (values (D, N),
-    unit)}`` in the scene's order (``scene.outputs`` is written for one design: it is
+    unit)}`` in the scene's column order (``scene.outputs`` is written for one design: it is
     vmapped here); ``{}`` for a scene without outputs."""
     if scene.outputs is None:
         return {}
-    units: dict = {}
+    units: dict = {}  # read from what the one-design function returns while it is traced
 
     def one(p1, mo1):
         outs = scene.outputs(p1, mo1)
@@ -130,11 +146,6 @@ def scene_outputs(scene, p, mo: Motion) -> dict:
     p = {k: jnp.asarray(v, mo.q.dtype) for k, v in p.items()}
     values = jax.vmap(one)(p, mo)
     return {k: (values[k], unit) for k, unit in units.items()}
-
-
-# A scene's units per output, in its order, noted when its program is traced (a unit is not
-# an array); a process that loads the stored program reads them from beside it instead.
-_UNITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2))
@@ -151,50 +162,36 @@ def outputs_stage(scene, points: int, with_outputs: bool, p, part):
     mo, _ = scene_kinematics(scene, points, p, part)
     if not with_outputs:
         return mo, {}
-    outs = scene_outputs(scene, p, mo)
-    _UNITS[scene] = {k: unit for k, (_, unit) in outs.items()}
-    return mo, {k: v for k, (v, _) in outs.items()}
+    return mo, {k: v for k, (v, _) in scene_outputs(scene, p, mo).items()}
 
 
 def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p):
     """``(motion, {output name: values (D, N)})`` of ``scene_motion`` and ``scene_outputs``
-    (the outputs' units: ``output_units``); ``{}`` without outputs.  Two programs, the
+    (their units: ``outputs.output_units``); ``{}`` without outputs.  Two programs, the
     stroke (``stroke_stage``) and the rest (``outputs_stage``): ``evaluate`` compiles them
     at once on two threads, and the sweep kernels are the same two programs, so a design's
     columns do not depend on the path.  Traceable: inside a trace the two are one program."""
     return outputs_stage(scene, points, with_outputs, p, stroke_stage(scene, points, options, p))
 
 
-def output_units(scene, points: int, options: SolverOptions, p) -> dict:
-    """``{output name: unit}`` in the scene's order: noted when ``motion_and_outputs`` is
-    traced, and kept beside the stored programs (``stored.cached_json``) for a process
-    that loads the stored program instead; traced (shapes only) where neither has it."""
-    if scene not in _STORED:
-
-        def known():
-            if scene not in _UNITS:
-                jax.eval_shape(functools.partial(motion_and_outputs, scene, points, options, True), p)
-            return list(_UNITS[scene].items())
-
-        _STORED[scene] = dict(cached_json("output units", (scene,), known))
-    return _STORED[scene]
-
-
-# ``output_units``'s answers in this process (read or written once per scene).
-_STORED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+def output_units(scene, points: int | None = None, options: SolverOptions | None = None, p=None) -> dict:
+    """``{output name: unit}`` in the scene's order: ``outputs.output_units(scene)`` (the
+    scene's declaration; `points`, `options` and `p` are not needed and ignored)."""
+    return scene_output_units(scene)
 
 
 def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     """``(motion, outputs)`` of D designs with concrete parameters ``p`` (``{name: (D,)}``):
     ``stroke_stage`` then ``outputs_stage``, compiled at once where they must be
     (``stored.cached_chain``).  Outputs that do not trace (``scene.outputs`` converting values
-    to numpy) are evaluated design by design on the host instead: ``outputs`` is then
-    ``None`` and the caller evaluates them."""
+    to numpy; ``outputs.run_outputs`` tells) are evaluated design by design on the host
+    instead: ``outputs`` is then ``None`` and the caller evaluates them."""
     first = (stroke_stage, (scene, int(points), options), (p,))
-    try:
-        mo, values = cached_chain(*first, outputs_stage, (scene, int(points), True), lambda part: (p, part))
-    except jax.errors.JAXTypeError:
-        mo, _ = cached_chain(*first, outputs_stage, (scene, int(points), False), lambda part: (p, part))
+
+    def run(traced: bool):
+        return cached_chain(*first, outputs_stage, (scene, int(points), traced), lambda part: (p, part)), traced
+
+    (mo, values), traced = run_outputs(scene, run)
+    if not traced:
         return mo, None
-    units = output_units(scene, int(points), options, p) if values else {}
-    return mo, {k: (values[k], unit) for k, unit in units.items()}
+    return mo, {k: (values[k], unit) for k, unit in scene_output_units(scene).items()}

@@ -63,10 +63,12 @@ from ..options import SolverOptions
 from ..positions import solve
 from ..solution import Solution
 from .base import Scene
+from .outputs import Outputs
 from ..xla import jit
 
 __all__ = [
     "SCENE",
+    "OUTPUT_UNITS",
     "FT",
     "SPEED",
     "mechanism",
@@ -313,13 +315,18 @@ def moment_arm(mo: Motion):
 def _outputs(p, mo: Motion):
     arm = moment_arm(mo)
     return {
-        "transmission_angle": (transmission_angle(mo.q), "rad"),
-        "moment_arm": (arm, "m"),
-        "force_ratio": (arm[0] / arm, "-"),
-        "x_ft": (mo.u[:, 0] / FT, "ft"),
-        "theta_deg": (jnp.degrees(mo.q[:, 0]), "deg"),
-        "phi_deg": (jnp.degrees(mo.q[:, 1]), "deg"),
+        "transmission_angle": transmission_angle(mo.q),
+        "moment_arm": arm,
+        "force_ratio": arm[0] / arm,
+        "x_ft": mo.u[:, 0] / FT,
+        "theta_deg": jnp.degrees(mo.q[:, 0]),
+        "phi_deg": jnp.degrees(mo.q[:, 1]),
     }
+
+
+#: The scene's outputs: their units, in column order.
+OUTPUT_UNITS = {"transmission_angle": "rad", "moment_arm": "m", "force_ratio": "-", "x_ft": "ft", "theta_deg": "deg",
+                "phi_deg": "deg"}
 
 
 def _validate(p):
@@ -396,7 +403,7 @@ SCENE = Scene(
     stroke=lambda p: (p["x1"], p["x2"]),
     speed=SPEED,
     units={"x": "m", "theta": "rad", "phi": "rad"},
-    outputs=_outputs,
+    outputs=Outputs(_outputs, OUTPUT_UNITS),
     validate=_validate,
     drawing=_drawing,
     document="A. Z. Creppe, 'SEM0501 - Dinâmica Aplicada às Máquinas, Trabalho 1 - Projeto de Mecanismo' (Prof. M. A. Trindade), student report, June 2021; corrections in docs/seeds/landing_gear.md",

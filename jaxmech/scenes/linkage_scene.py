@@ -20,6 +20,7 @@ from ..linkage.files import read_linkage_file
 from ..linkage.spec import Linkage
 from ..units import to_si
 from .base import Scene
+from .outputs import Outputs
 
 __all__ = ["linkage_scene", "scene_from_file", "PARAMETER_UNITS"]
 
@@ -45,7 +46,20 @@ def _coordinate_unit(lk: Linkage, name: str) -> str:
     return "m" if name in lk.mechanism.lengths else "rad"
 
 
-def _outputs(lk: Linkage):
+def _output_units(lk: Linkage) -> dict[str, str]:
+    """The drive effort of each input and every joint's reaction (components, and a
+    prismatic joint's moment): their units, in column order."""
+    mech = lk.model.mechanism
+    out = {f"effort_{_column(name)}": "N" if name in mech.lengths else "N m" for name in mech.inputs}
+    for j in lk.model.joints:
+        col = _column(joint_name(j))
+        out.update({f"F_{col}_x": "N", f"F_{col}_y": "N"})
+        if isinstance(j, Prismatic):
+            out[f"M_{col}"] = "N m"
+    return out
+
+
+def _outputs(lk: Linkage) -> Outputs:
     model = lk.model
     mech = model.mechanism
 
@@ -55,19 +69,17 @@ def _outputs(lk: Linkage):
             return joint_reactions(model, st)
 
         eff, forces, moments = jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t)
-        out = {}
-        for k, name in enumerate(mech.inputs):
-            out[f"effort_{_column(name)}"] = (eff[:, k], "N" if name in mech.lengths else "N m")
+        out = {f"effort_{_column(name)}": eff[:, k] for k, name in enumerate(mech.inputs)}
         for j in model.joints:
             name = joint_name(j)
             col = _column(name)
-            out[f"F_{col}_x"] = (jnp.real(forces[name]), "N")
-            out[f"F_{col}_y"] = (jnp.imag(forces[name]), "N")
+            out[f"F_{col}_x"] = jnp.real(forces[name])
+            out[f"F_{col}_y"] = jnp.imag(forces[name])
             if isinstance(j, Prismatic):
-                out[f"M_{col}"] = (moments[name], "N m")
+                out[f"M_{col}"] = moments[name]
         return out
 
-    return outputs
+    return Outputs(outputs, _output_units(lk))
 
 
 def _drawing(lk: Linkage):

@@ -21,8 +21,8 @@ kept, with its status and NaN values; nothing is dropped.
 - ``read_dataset``: a dataset (or an older one, named as the new) as a table;
   ``convert_dataset``: an older dataset rewritten in the current layout.
 
-Modules: ``evaluate`` (one design, traceable; figures), ``designs`` (grids, random
-designs, value checks), ``kernel`` (compiled chunk kernels), ``result`` (``SweepResult``),
+Modules: ``evaluate`` (figures; one design's columns come from ``scenes.columns``),
+``designs`` (grids, random designs, value checks), ``kernel`` (compiled chunk kernels), ``result`` (``SweepResult``),
 ``dataset`` (the Parquet layout, resuming), ``run`` (the sweeps).
 """
 

@@ -1,8 +1,9 @@
-"""One design, traceable: its motion over the stroke, its table columns, and the figures
-(per-design reductions over the stroke) that a figures sweep keeps instead of the table.
+"""Figures: the per-design reductions over the stroke that a figures sweep keeps instead
+of the table, traceable (the kernels compute them in the compiled program).
 
-Everything here works under ``jit``/``vmap``/``grad``; the sweep kernels vmap it over a
-chunk of designs, and ``jaxmech.design`` differentiates it.
+One design's motion and columns (``design_motion``, ``design_columns``, ``batch_columns``,
+``design_status``) live with the scene evaluation, in ``jaxmech.scenes.columns`` (so that
+``jaxmech.design`` does not import the sweeps); they are re-exported here.
 """
 
 from __future__ import annotations
@@ -10,13 +11,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 
-import jax
 import jax.numpy as jnp
 
-from ..options import SolverOptions
 from ..scenes.base import Scene
-from ..scenes.columns import is_drive_column, mask_failed, table_columns
-from ..scenes.evaluation import SCENE_OPTIONS, motion_and_outputs, output_units, scene_motion
+from ..scenes.columns import batch_columns as batch_columns
+from ..scenes.columns import design_columns as design_columns
+from ..scenes.columns import design_motion as design_motion
+from ..scenes.columns import design_status as design_status
+from ..scenes.columns import column_names, is_drive_column, mask_failed, table_columns
 from ..status import Status
 
 __all__ = [
@@ -25,58 +27,12 @@ __all__ = [
     "design_columns",
     "design_motion",
     "design_status",
+    "figure_names",
     "is_drive_column",
     "mask_failed",
     "stroke_figures",
     "table_columns",
 ]
-
-
-def design_motion(scene: Scene, points: int, p, *, options: SolverOptions = SCENE_OPTIONS):
-    """One design's ``Motion`` over its stroke, traceable (works under ``jit``/``vmap``/``grad``):
-    ``scenes.evaluation.scene_motion`` for a batch of one.
-
-    **Arguments**
-
-    - `scene`: the scene; `points`: samples along the stroke (both ends included).
-    - `p`: ``{name: scalar}``, every parameter of the scene (SI units).
-
-    **Returns** ``(motion, ok)``: a ``Motion`` with ``N = points`` samples (finite
-    placeholders at failed samples, as ``scene_motion`` says) and the boolean ``(N,)`` mask
-    of converged samples.
-    """
-    mo, ok = scene_motion(scene, points, {k: jnp.asarray(v)[None] for k, v in p.items()}, options)
-    return jax.tree_util.tree_map(lambda x: x[0], mo), ok[0]
-
-
-def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SCENE_OPTIONS):
-    """One design's table columns, traceable: ``({NAME[UNIT]: (N,)}, status (N,))``.
-
-    Columns are those of ``SceneResult.table`` (without ``status[-]``), and at failed
-    samples they hold finite placeholders (see ``design_motion``): mask them with the
-    status.  Used by ``jaxmech.design.scene_figure``.
-    """
-    cols, status = batch_columns(scene, points, {k: jnp.asarray(v)[None] for k, v in p.items()}, options)
-    return {k: v[0] for k, v in cols.items()}, status[0]
-
-
-def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
-    """The table columns of D designs (``p`` leaves ``(D,)``), traceable: ``({NAME[UNIT]:
-    (D, N)}, status (D, N))``, unmasked (finite placeholders at failed samples), from
-    ``motion_and_outputs``: the sweep kernels' columns, and ``run_scene``'s."""
-    mo, values = motion_and_outputs(scene, points, options, scene.outputs is not None, p)
-    units = output_units(scene, points, options, p) if values else {}
-    return table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}), mo.status
-
-
-def design_status(status, xp=jnp):
-    """A design's status from its samples' ``(..., N)``: ``CONVERGED`` when every sample
-    converged, else the status of the first sample along the stroke that did not (where
-    the design broke).  Returns ``(...,)`` int32."""
-    bad = status != Status.CONVERGED
-    first = xp.argmax(bad, axis=-1)
-    code = xp.take_along_axis(status, first[..., None], axis=-1)[..., 0]
-    return xp.where(xp.any(bad, axis=-1), code, int(Status.CONVERGED)).astype(xp.int32)
 
 
 # =========================================================================== figures
@@ -137,6 +93,26 @@ def _split(name: str) -> tuple[str, str]:
     return base, unit.rstrip("]")
 
 
+def _reduced(scene: Scene, figures: Figures, names) -> list[tuple[str, str, str]]:
+    """``(figure name, column, reduction)`` of every reduction, in column order, for table
+    columns ``names``."""
+    uname = scene.mechanism.inputs[0]
+    columns = figures.columns if figures.columns is not None else [k for k in names if not is_drive_column(scene, k)]
+    out = []
+    for name in columns:
+        base, unit = _split(name)
+        for r in figures.reductions:
+            out.append((f"{base}_{r}[{scene.units[uname] if r.endswith('_at') else unit}]", name, r))
+    return out
+
+
+def figure_names(scene: Scene, figures: Figures) -> list[str]:
+    """The columns of a figures sweep, in order (``status[-]`` excepted), from the scene's
+    declared columns (``scenes.columns.column_names``) alone."""
+    return [f for f, _, _ in _reduced(scene, figures, column_names(scene))] + [n for n, _ in figures.functions] + [
+        "failed_points[-]"]
+
+
 def stroke_figures(scene: Scene, figures: Figures, cols: dict, status, p, xp=jnp) -> dict:
     """One design's figures: ``{name: scalar}`` with ``status[-]`` and ``failed_points[-]``.
 
@@ -146,22 +122,15 @@ def stroke_figures(scene: Scene, figures: Figures, cols: dict, status, p, xp=jnp
     """
     figures.check(scene, list(cols))
     ok_all = xp.all(status == Status.CONVERGED)
-    uname = scene.mechanism.inputs[0]
-    u = cols[f"{uname}[{scene.units[uname]}]"]
-    names = figures.columns if figures.columns is not None else [k for k in cols if not is_drive_column(scene, k)]
+    u = cols[f"{scene.mechanism.inputs[0]}[{scene.units[scene.mechanism.inputs[0]]}]"]
     out = {}
-    for name in names:
+    for fname, name, r in _reduced(scene, figures, list(cols)):
         v = cols[name]
-        base, unit = _split(name)
-        i_max, i_min = xp.argmax(v), xp.argmin(v)
-        values = {
-            "max": (v[i_max], unit), "max_at": (u[i_max], scene.units[uname]),
-            "min": (v[i_min], unit), "min_at": (u[i_min], scene.units[uname]),
-            "travel": (v[i_max] - v[i_min], unit),
-        }
-        for r in figures.reductions:
-            x, un = values[r]
-            out[f"{base}_{r}[{un}]"] = x
+        i = xp.argmax(v) if r.startswith("max") else xp.argmin(v)
+        if r == "travel":
+            out[fname] = v[xp.argmax(v)] - v[xp.argmin(v)]
+        else:
+            out[fname] = u[i] if r.endswith("_at") else v[i]
     for name, fn in figures.functions:
         x = xp.asarray(fn(cols, p))
         if x.shape != ():

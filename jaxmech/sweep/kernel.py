@@ -22,9 +22,11 @@ from ..scenes.base import Scene
 from ..options import SolverOptions
 from ..status import Status
 from .designs import reject
-from ..scenes.evaluation import motion_and_outputs, output_units, outputs_stage, scene_motion, stroke_stage
+from ..scenes.columns import batch_columns, mask_failed, table_columns
+from ..scenes.evaluation import motion_and_outputs, outputs_stage, scene_motion, stroke_stage
+from ..scenes.outputs import output_units, run_outputs
 from ..xla import jit
-from .evaluate import Figures, batch_columns, mask_failed, stroke_figures, table_columns
+from .evaluate import Figures, figure_names, stroke_figures
 
 __all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
 
@@ -68,11 +70,6 @@ class ChunkData:
         return int(self.status.shape[0])
 
 
-# Column order as the scene writes it (run_scene's order), recorded when the kernel is
-# traced: a compiled program returns its dict outputs with their keys sorted.
-_COLUMN_ORDER: dict = {}
-
-
 def _chunk(scene: Scene, job: Job, p):
     """A chunk of designs (``p`` leaves ``(chunk,)``), as one traced function.  Trace mode:
     ``motion_and_outputs`` (the compiled kernel is its two programs, ``_TwoStage``, which
@@ -87,39 +84,36 @@ def _chunk(scene: Scene, job: Job, p):
     cols, status = batch_columns(scene, job.points, p, job.options)
     figs = jax.vmap(lambda c, s, p1: stroke_figures(scene, job.figures, c, s, p1))(cols, status, p)
     status = figs.pop("status[-]")
-    _COLUMN_ORDER[(scene.name, job.figures)] = list(figs)
     return figs, status
 
 
 def _trace_columns(scene: Scene, job: Job, mo, values, p) -> tuple[dict, np.ndarray]:
     """Masked columns ``{NAME[UNIT]: (n, N)}`` and status ``(n, N)`` (host numpy) from the
     trace-mode kernel's motion and output values, as ``SceneResult.table`` cuts them."""
-    units = output_units(scene, job.points, job.options, p) if values else {}
+    units = output_units(scene) if values else {}
     status = np.asarray(mo.status)
     cols = table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}, xp=np)
     cols = mask_failed(scene, cols, status, np)
     return {k: np.array(v) for k, v in cols.items()}, status.copy()
 
 
-def in_scene_order(scene: Scene, figures, cols: dict) -> dict:
-    """``cols`` in the order ``run_scene``'s table (or the figures) has them, where known."""
-    order = _COLUMN_ORDER.get((scene.name, figures))
-    if not order or set(order) != set(cols):
-        return cols
-    return {k: cols[k] for k in order}
+def in_scene_order(scene: Scene, figures: Figures, cols: dict) -> dict:
+    """A figures kernel's ``cols`` in the figures' order (``evaluate.figure_names``): a
+    compiled program returns its dict outputs with their keys sorted."""
+    return {k: cols[k] for k in figure_names(scene, figures)}
 
 
 def outputs_mode(scene: Scene, job: Job, param_names) -> str:
     """``"vmap"`` when the scene's outputs trace into the kernel, else ``"per design"``
-    (traces one design; records the column order on the way)."""
-    try:
-        jax.eval_shape(
-            lambda p: _chunk(scene, job, p),
-            {k: jax.ShapeDtypeStruct((1,), jnp.result_type(float)) for k in param_names},
-        )
-    except jax.errors.JAXTypeError:
-        return "per design"
-    return "vmap"
+    (``scenes.outputs.run_outputs`` tells, tracing one design's kernel)."""
+    spec = {k: jax.ShapeDtypeStruct((1,), jnp.result_type(float)) for k in param_names}
+
+    def run(traced: bool) -> str:
+        mode = "vmap" if traced else "per design"
+        jax.eval_shape(lambda p: _chunk(scene, dataclasses.replace(job, outputs=mode), p), spec)
+        return mode
+
+    return run_outputs(scene, run)
 
 
 def bytes_per_design_estimate(scene: Scene, job: Job, param_names) -> float:
@@ -226,13 +220,14 @@ def round_up(n: int, m: int) -> int:
 
 
 def _first_compile(scene, job, names):
-    """Compile the vmapped kernel, or the motion-only kernel when outputs cannot be vmapped."""
-    try:
-        return compiled_kernel(scene, job, names)[0], job
-    except jax.errors.JAXTypeError:
-        # scene.outputs converts traced values to Python/numpy: evaluate it design by design.
-        job = dataclasses.replace(job, outputs="per design")
-        return compiled_kernel(scene, job, names)[0], job
+    """Compile the vmapped kernel, or the motion-only kernel where the scene's outputs do not
+    trace (``scenes.outputs.run_outputs``: they are evaluated design by design)."""
+
+    def run(traced: bool):
+        j = dataclasses.replace(job, outputs="vmap" if traced else "per design")
+        return compiled_kernel(scene, j, names)[0], j
+
+    return run_outputs(scene, run)
 
 
 def plan_chunk(scene: Scene, job: Job, names, d: int, chunk_size: int | None, budget: float):

@@ -15,9 +15,10 @@ from ...actuators import ScrewJack
 from ...dynamics import Body, Gravity, Model, Moment, generalized_forces
 from ...mechanism import Mechanism, cis
 from ..base import Scene
+from ..outputs import Outputs
 from ...xla import jit
 
-__all__ = ["SCENE", "LANDING_SCENE", "SCENARIOS", "PARAMETERS", "THESIS_INPUTS", "MECHANISM", "scene_for", "design", "geometry", "validate", "air_moment", "screw_torques", "SCREW", "MODEL", "quasi_static"]
+__all__ = ["SCENE", "LANDING_SCENE", "SCENARIOS", "PARAMETERS", "THESIS_INPUTS", "MECHANISM", "scene_for", "design", "geometry", "validate", "air_moment", "screw_torques", "SCREW", "MODEL", "quasi_static", "OUTPUT_UNITS"]
 
 
 MM = 1e-3  #: one millimetre (m): the thesis's lengths are in mm
@@ -342,15 +343,15 @@ def _outputs(p, mo):
     out = quasi_static(mo.q, mo.u, p)
     g = p["g"]
     return {
-        "F_input": (out["F_input"], "N"),
-        "G12G": (out["G12G"], "N"),
-        "G12F": (out["G12F"], "N"),
-        "T_R": (out["T_R"], "N m"),
-        "T_L": (out["T_L"], "N m"),
-        "M12": (out["M12"], "N m"),
-        "aA_over_g": (jnp.abs(mo.points["A"][2]) / g, "-"),
-        "aD_over_g": (jnp.abs(mo.points["D"][2]) / g, "-"),
+        **{k: out[k] for k in ("F_input", "G12G", "G12F", "T_R", "T_L", "M12")},
+        "aA_over_g": jnp.abs(mo.points["A"][2]) / g,
+        "aD_over_g": jnp.abs(mo.points["D"][2]) / g,
     }
+
+
+#: The scenes' outputs: their units, in column order (forces, moments, accelerations in g).
+OUTPUT_UNITS = {"F_input": "N", "G12G": "N", "G12F": "N", "T_R": "N m", "T_L": "N m", "M12": "N m", "aA_over_g": "-",
+                "aD_over_g": "-"}
 
 
 # --------------------------------------------------------------------------- scenes
@@ -400,7 +401,7 @@ def scene_for(scenario: str = "cruise") -> Scene:
         stroke=_stroke,
         speed=0.035,
         units={"s34": "m", "theta12": "rad", "theta13": "rad", "x2": "m", "y2": "m"},
-        outputs=_outputs,
+        outputs=Outputs(_outputs, OUTPUT_UNITS),
         validate=validate,
         drawing=_drawing,
         parameters=PARAMETERS,

@@ -15,9 +15,10 @@ from ...dynamics import Body, Gravity, Model, Moment, PointForce, generalized_fo
 from ...kinematics import Motion, chain_rule
 from ...mechanism import Mechanism, cis
 from ..base import Scene
+from ..outputs import Outputs
 from ...xla import jit
 
-__all__ = ["SCENE", "mechanism", "DEFAULTS", "PARAMETERS", "closed_form_positions", "MODEL", "MOTOR", "loop_determinants", "torque", "torque_document", "voltage"]
+__all__ = ["SCENE", "mechanism", "DEFAULTS", "PARAMETERS", "closed_form_positions", "MODEL", "MOTOR", "loop_determinants", "torque", "torque_document", "voltage", "OUTPUT_UNITS"]
 
 
 _K = 17.0  # the report's "meter-model conversion factor" (§4): drawing units per metre
@@ -329,13 +330,18 @@ def _outputs(p, motion: Motion):
     tq = torque(p, motion)
     qdyn = 0.5 * p["rho"] * p["U"] ** 2
     return {
-        "torque": (tq, "N m"),
-        "voltage": (voltage(p, motion, tq), "V"),
-        "current": (MOTOR.steady_current(tq, p), "A"),
-        "torque_document": (torque_document(p, motion), "N m"),
-        "lift_main": (qdyn * p["S1"] * p["Cl_delta"] * motion.q[:, 1], "N"),
-        "lift_second": (qdyn * p["S2"] * p["Cl_theta"] * motion.q[:, 5], "N"),
+        "torque": tq,
+        "voltage": voltage(p, motion, tq),
+        "current": MOTOR.steady_current(tq, p),
+        "torque_document": torque_document(p, motion),
+        "lift_main": qdyn * p["S1"] * p["Cl_delta"] * motion.q[:, 1],
+        "lift_second": qdyn * p["S2"] * p["Cl_theta"] * motion.q[:, 5],
     }
+
+
+#: The scene's outputs: their units, in column order.
+OUTPUT_UNITS = {"torque": "N m", "voltage": "V", "current": "A", "torque_document": "N m", "lift_main": "N",
+                "lift_second": "N"}
 
 
 # --------------------------------------------------------------------------- drawing
@@ -362,7 +368,7 @@ SCENE = Scene(
     stroke=lambda p: (ALPHA_START, ALPHA_END),
     speed=1.0,
     units={"alpha": "rad", **{n: "rad" for n in COORDS}},
-    outputs=_outputs,
+    outputs=Outputs(_outputs, OUTPUT_UNITS),
     validate=_validate,
     drawing=_drawing,
     document="A. Carnevali, A. Fernandez, G. Landa, 'MSD Project: flap extraction and retraction system', Group 6 project report, Multibody System Dynamics (Prof. P. Masarati), Politecnico di Milano, A.Y. 2022/23; corrections in docs/seeds/flap_msd.md",

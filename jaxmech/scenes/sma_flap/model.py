@@ -16,9 +16,10 @@ from ...options import SolverOptions
 from ...positions import solve
 from ...solution import Solution
 from ..base import Scene
+from ..outputs import Outputs
 from ...xla import jit
 
-__all__ = ["SCENE", "params", "parameters", "flap_mechanism", "residual", "drive_params", "SCENE_CHAIN", "stiffness", "equilibrium", "tensions", "rigid_wire_angle", "wire_force_for_angle", "EPS_RANGE"]
+__all__ = ["SCENE", "params", "parameters", "flap_mechanism", "residual", "drive_params", "SCENE_CHAIN", "stiffness", "equilibrium", "tensions", "rigid_wire_angle", "wire_force_for_angle", "EPS_RANGE", "output_units"]
 
 
 G = 9.81
@@ -368,13 +369,20 @@ def _outputs(p, mo):
     tw, ts, kmin, rigid = _outputs_batch(n, pj, mo.q, mo.u[:, 0])
     out = {}
     for j in range(n):
-        out[f"theta{j + 1}_deg"] = (jnp.degrees(mo.q[:, j]), "deg")
-        out[f"theta{j + 1}_rigid"] = (rigid[:, j], "rad")
-        out[f"wire{j + 1}_tension"] = (tw[:, j], "N")
-        out[f"wire{j + 1}_stress"] = (tw[:, j] / p["A_w"], "Pa")
-        out[f"spring{j + 1}_tension"] = (ts[:, j], "N")
-    out["stiffness_min"] = (kmin, "N m/rad")
+        out[f"theta{j + 1}_deg"] = jnp.degrees(mo.q[:, j])
+        out[f"theta{j + 1}_rigid"] = rigid[:, j]
+        out[f"wire{j + 1}_tension"] = tw[:, j]
+        out[f"wire{j + 1}_stress"] = tw[:, j] / p["A_w"]
+        out[f"spring{j + 1}_tension"] = ts[:, j]
+    out["stiffness_min"] = kmin
     return out
+
+
+def output_units(n: int) -> dict[str, str]:
+    """The outputs of the scene of `n` hinges: their units, in column order."""
+    per_hinge = {"theta{}_deg": "deg", "theta{}_rigid": "rad", "wire{}_tension": "N", "wire{}_stress": "Pa",
+                 "spring{}_tension": "N"}
+    return {**{k.format(j): u for j in range(1, n + 1) for k, u in per_hinge.items()}, "stiffness_min": "N m/rad"}
 
 
 def _drawing(p):
@@ -415,7 +423,7 @@ def _scene(n, name, summary):
         stroke=lambda p: EPS_RANGE,
         speed=0.01,
         units={"eps": "-", **{f"theta{j}": "rad" for j in range(1, n + 1)}},
-        outputs=_outputs,
+        outputs=Outputs(_outputs, output_units(n)),
         validate=_validate,
         drawing=_drawing,
         document="P. B. Camara Leal, 'Dynamic modelling of sma-driven flap', note, February 19, 2016; corrections in docs/seeds/sma_flap.md",
