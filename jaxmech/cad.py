@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,15 @@ __all__ = ["Sheet", "write_dxf", "write_svg", "UNIT_SCALE", "APPID"]
 
 APPID = "JAXMECH"  # the DXF application id of the joints' XDATA
 UNIT_SCALE = {"m": 1.0, "mm": 1000.0}  # drawing units per metre
+
+
+class Extent(NamedTuple):
+    """A sheet's bounding box (``Sheet.extent``), in the drawing's units."""
+
+    x0: float
+    y0: float
+    x1: float
+    y1: float
 
 
 class Sheet:
@@ -63,7 +73,8 @@ class Sheet:
         if np.isfinite(z):
             self.items.append(("text", layer, complex(z), str(s), float(h)))
 
-    def extent(self):
+    def extent(self) -> Extent:
+        """The box around every item (circles and arcs whole; a text at its anchor)."""
         zs = []
         for it in self.items:
             if it[0] == "polyline":
@@ -73,7 +84,7 @@ class Sheet:
             elif it[0] == "text":
                 zs.append(it[2])
         z = np.array(zs or [0j])
-        return z.real.min(), z.imag.min(), z.real.max(), z.imag.max()
+        return Extent(z.real.min(), z.imag.min(), z.real.max(), z.imag.max())
 
 
 def _fmt(x: float) -> str:

@@ -69,7 +69,17 @@ def _parser() -> _Parser:
         epilog="Compiled programs are cached in ~/.cache/jaxmech (JAXMECH_COMPILE_CACHE=DIR moves it, =0 turns it off).",
     )
     sub = p.add_subparsers(dest="verb", metavar="VERB", required=True, parser_class=_Parser)
+    _add_scenes(sub)
+    _add_run(sub)
+    _add_animate(sub)
+    _add_export(sub)
+    _add_sweep(sub)
+    _add_report(sub)
+    return p
 
+
+def _add_scenes(sub) -> None:
+    """Add the ``scenes`` verb: the scenes, or one scene's parameters."""
     sc = sub.add_parser(
         "scenes",
         help="list the scenes, or the parameters of one",
@@ -78,6 +88,9 @@ def _parser() -> _Parser:
     )
     sc.add_argument("scene", metavar="SCENE", nargs="?", default=None, help="a scene whose parameters to list")
 
+
+def _add_run(sub) -> None:
+    """Add the ``run`` verb: a scene over its stroke to CSV and PNG plots."""
     r = sub.add_parser(
         "run",
         help="run a scene over its stroke: CSV, PNG plots, summary",
@@ -89,6 +102,9 @@ def _parser() -> _Parser:
     r.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
     r.add_argument("--out", default="jaxmech-out", metavar="DIR", help="output folder (default ./jaxmech-out)")
 
+
+def _add_animate(sub) -> None:
+    """Add the ``animate`` verb: a GIF or HTML of the stroke."""
     a = sub.add_parser(
         "animate",
         help="animate a scene's stroke to GIF or HTML",
@@ -100,6 +116,9 @@ def _parser() -> _Parser:
     a.add_argument("--fps", type=values.positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
     a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif or FILE.html (default ./SCENE.gif)")
 
+
+def _add_export(sub) -> None:
+    """Add the ``export`` verb: a pose or the stroke as DXF or SVG."""
     e = sub.add_parser(
         "export",
         help="export a pose (or the stroke) of a scene to DXF or SVG for CAD",
@@ -115,6 +134,9 @@ def _parser() -> _Parser:
     e.add_argument("--points", type=values.points, default=101, metavar="N", help="with --stroke: inputs over the stroke (default 101)")
     e.add_argument("--units", choices=("m", "mm"), default="m", help="the drawing's unit (default m)")
 
+
+def _add_sweep(sub) -> None:
+    """Add the ``sweep`` verb: a grid or random designs to CSV or Parquet."""
     s = sub.add_parser(
         "sweep",
         help="sweep a scene over a grid or random designs to CSV or a Parquet dataset",
@@ -140,6 +162,9 @@ def _parser() -> _Parser:
     s.add_argument("--chunk-size", type=values.positive("--chunk-size"), default=None, metavar="K", help="designs per compiled batch (default: the sweep's own)")
     s.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar (it is shown only on a terminal anyway)")
 
+
+def _add_report(sub) -> None:
+    """Add the ``report`` verb: every scene into one folder."""
     rep = sub.add_parser(
         "report",
         help="run every scene (CSV, plots, summary) into one folder",
@@ -149,7 +174,6 @@ def _parser() -> _Parser:
     rep.add_argument("--out", default="jaxmech-report", metavar="DIR", help="output folder (default ./jaxmech-report)")
     rep.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
     rep.add_argument("--scenes", nargs="+", metavar="NAME", default=None, help="only these scenes (default: all)")
-    return p
 
 
 # --------------------------------------------------------------------------- shared steps

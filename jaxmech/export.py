@@ -40,6 +40,7 @@ import functools
 import math
 from collections.abc import Mapping
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -95,7 +96,18 @@ def link_names(linkage) -> dict:
     return out
 
 
-def _resolve(obj, params):
+class Resolved(NamedTuple):
+    """What an export draws (``_resolve``): the `scene`, its parameter values `params`, the
+    link `names` ``{tuple of points: link name}`` (empty unless a ``Linkage`` or a linkage
+    file), and the `result` to draw from (None unless a ``SceneResult`` of this design)."""
+
+    scene: object
+    params: dict
+    names: dict
+    result: object
+
+
+def _resolve(obj, params) -> Resolved:
     """``(scene, params, names, result)`` of a ``Scene``, ``SceneResult``, ``Linkage``, a scene
     name or a linkage file's path."""
     from .linkage import Linkage
@@ -127,7 +139,7 @@ def _resolve(obj, params):
         p = scene.params(**dict(params or {}))
     else:
         raise TypeError(f"export takes a Scene, SceneResult, Linkage, scene name or linkage file; got {type(obj).__name__}")
-    return scene, p, names, result
+    return Resolved(scene, p, names, result)
 
 
 def _spec(scene, p) -> dict:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable, Mapping, Sequence
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -43,6 +44,7 @@ __all__ = [
     "split_drive",
     "join_drive",
     "stroke_kinematics",
+    "SampleKinematics",
     "sample_kinematics",
     "chain_rule",
 ]
@@ -250,16 +252,42 @@ def chain_rule(d1, d2, u_dot, u_ddot):
     return qd, qdd
 
 
-def sample_kinematics(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2):
+class SampleKinematics(NamedTuple):
+    """Kinematics at one sample (``sample_kinematics``; unpacks like the 6-tuple it
+    replaces): the inputs `u` and their rates, the coordinates' rates, and ``points =
+    {name: (pos, vel, acc)}`` (complex, m, m/s, m/s^2)."""
+
+    u: jax.Array
+    u_dot: jax.Array
+    u_ddot: jax.Array
+    q_dot: jax.Array
+    q_ddot: jax.Array
+    points: dict
+
+
+class SampleMotion(NamedTuple):
+    """One sample's motion from its drive rates (``_one_sample``), NaN where it failed:
+    coordinates `q` and their rates, the per-unit-input derivatives `dq_du`, `d2q_du2`, and
+    ``points = {name: (pos, vel, acc)}``."""
+
+    q: jax.Array
+    q_dot: jax.Array
+    q_ddot: jax.Array
+    dq_du: jax.Array
+    d2q_du2: jax.Array
+    points: dict
+
+
+def sample_kinematics(mech: Mechanism, point_names: Sequence[str], drive: Callable, p, t, q, d1, d2) -> SampleKinematics:
     """Kinematics at one solved sample from its per-unit-input derivatives ``d1 = dq/du``,
-    ``d2 = d2q/du2`` (as ``stroke_kinematics`` gives them): ``(u, u_dot, u_ddot, q_dot,
-    q_ddot, points)`` with ``points = {name: (pos, vel, acc)}``.  Finite wherever ``q``,
+    ``d2 = d2q/du2`` (as ``stroke_kinematics`` gives them): a ``SampleKinematics`` ``(u,
+    u_dot, u_ddot, q_dot, q_ddot, points)`` with ``points = {name: (pos, vel, acc)}``.  Finite wherever ``q``,
     ``d1`` and ``d2`` are (give placeholders at failed samples and mask afterwards): the one
     evaluation that ``motion``, sweeps and design share.
     """
     u, ud, udd = time_derivatives(lambda t_: jnp.reshape(drive(t_), (mech.dof,)), t)
     qd, qdd = chain_rule(d1, d2, ud, udd)
-    return u, ud, udd, qd, qdd, point_kinematics(mech, point_names, p, q, qd, qdd, u, ud, udd)
+    return SampleKinematics(u, ud, udd, qd, qdd, point_kinematics(mech, point_names, p, q, qd, qdd, u, ud, udd))
 
 
 def point_kinematics(mech: Mechanism, point_names: Sequence[str], p, q, qd, qdd, u, ud, udd) -> dict:
@@ -280,7 +308,7 @@ def point_kinematics(mech: Mechanism, point_names: Sequence[str], p, q, qd, qdd,
     return pts
 
 
-def _one_sample(mech: Mechanism, point_names: Sequence[str], p, u, ud, udd, q, d1, d2):
+def _one_sample(mech: Mechanism, point_names: Sequence[str], p, u, ud, udd, q, d1, d2) -> SampleMotion:
     """One sample's kinematics from its drive rates, NaN wherever the sample failed."""
     ok = jnp.all(jnp.isfinite(q))
     qs = jnp.where(ok, q, 0.0)
@@ -289,7 +317,7 @@ def _one_sample(mech: Mechanism, point_names: Sequence[str], p, u, ud, udd, q, d
     qd, qdd = chain_rule(d1, d2, ud, udd)
     pts = point_kinematics(mech, point_names, p, qs, qd, qdd, u, ud, udd)
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
-    return (q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
+    return SampleMotion(q, nan(qd), nan(qdd), nan(d1), nan(d2), jax.tree_util.tree_map(nan, pts))
 
 
 def split_drive(drive):
@@ -312,7 +340,7 @@ def _motion_eval(mech, point_names, drive_static, drive_leaves, p, t, q, d1, d2)
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, mech.dof)
     out = jax.vmap(lambda *a: _one_sample(mech, point_names, p, *a))(u, ud, udd, q, d1, d2)
-    return (u, ud, udd) + out
+    return (u, ud, udd) + tuple(out)
 
 
 def drive_samples(mech: Mechanism, drive, t):

@@ -33,7 +33,7 @@ import dataclasses
 import functools
 import hashlib
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -147,6 +147,19 @@ def _names(value, what: str) -> tuple[str, ...]:
     return names
 
 
+class Identity(NamedTuple):
+    """The names a mechanism's equality and hash start from (``Mechanism._identity``): equal
+    mechanisms have equal identities (then their traced functions are compared)."""
+
+    name: str
+    coords: tuple
+    inputs: tuple
+    params: tuple
+    lengths: Any
+    signed: Any
+    points: tuple
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Mechanism:
     """Static description of a planar mechanism (hashable, safe as a jit static argument).
@@ -239,7 +252,7 @@ class Mechanism:
             fns["branch"] = self.branch_value
         for name in self.points:
             fns[f"point {name}"] = functools.partial(self.point, name)
-        digest = hashlib.sha256(repr((static, str(dtype))).encode())
+        digest = hashlib.sha256(repr((tuple(static), str(dtype))).encode())
         try:
             for label, fn in fns.items():
                 closed = jax.make_jaxpr(fn)(q, u, p)
@@ -265,8 +278,8 @@ class Mechanism:
         return value if kind == "jaxpr" else None
 
     @functools.cached_property
-    def _identity(self):
-        return (self.name, self.coords, self.inputs, self.params, self.lengths, self.signed, tuple(self.points))
+    def _identity(self) -> Identity:
+        return Identity(self.name, self.coords, self.inputs, self.params, self.lengths, self.signed, tuple(self.points))
 
     def __eq__(self, other):
         if self is other:

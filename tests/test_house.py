@@ -1,5 +1,6 @@
 """The house rules a reader can check mechanically: modules of one concept (about 500 lines
-at most), no private name imported from another module of the package, no absolute path of
+at most), functions of named stages (80 lines at most), a named record for more than three
+results, no private name imported from another module of the package, no absolute path of
 any machine in the repository."""
 
 import ast
@@ -12,15 +13,81 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "jaxmech"
 MAX_LINES = 500
+MAX_FUNCTION_LINES = 80  # a stage a reader takes in at once
+MAX_RESULTS = 3  # more values than this come back as a named record
 
 
 def _modules():
     return sorted(PACKAGE.rglob("*.py"))
 
 
+FUNCTIONS = (ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def long_functions(source: str, where: str = "") -> list:
+    """Every function or method (nested ones too) longer than ``MAX_FUNCTION_LINES``, from its
+    ``def`` line to its last line (decorators not counted)."""
+    return [f"{where}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)"
+            for node in ast.walk(ast.parse(source))
+            if isinstance(node, FUNCTIONS) and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES]
+
+
+def _own_returns(fn):
+    """The return statements of `fn` itself, not of the functions, lambdas or classes it defines."""
+    stack = list(ast.iter_child_nodes(fn))
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (*FUNCTIONS, ast.Lambda, ast.ClassDef)):
+            continue
+        if isinstance(node, ast.Return):
+            yield node
+        stack.extend(ast.iter_child_nodes(node))
+
+
+def long_tuple_returns(source: str, where: str = "") -> list:
+    """Every module-level function or method (of a module-level class) that returns a tuple
+    literal of more than ``MAX_RESULTS`` values.  A tuple with a starred element is a
+    sequence of varying length (``(a, b, *rest)``), not a fixed group of results, and is
+    not counted; nor are the returns of nested functions (a jitted body's carry)."""
+    tree = ast.parse(source)
+    top = [n for n in tree.body if isinstance(n, FUNCTIONS)]
+    top += [m for c in tree.body if isinstance(c, ast.ClassDef) for m in c.body if isinstance(m, FUNCTIONS)]
+    return [f"{where}:{r.lineno} {fn.name} returns {len(r.value.elts)} values"
+            for fn in top for r in _own_returns(fn)
+            if isinstance(r.value, ast.Tuple) and len(r.value.elts) > MAX_RESULTS
+            and not any(isinstance(e, ast.Starred) for e in r.value.elts)]
+
+
 def test_no_module_over_about_500_lines():
     long = {str(f.relative_to(ROOT)): n for f in _modules() if (n := len(f.read_text().splitlines())) > MAX_LINES}
     assert not long, long
+
+
+def test_no_function_over_80_lines():
+    long = [x for f in _modules() for x in long_functions(f.read_text(), str(f.relative_to(ROOT)))]
+    assert not long, long
+
+
+def test_no_function_returns_more_than_three_values():
+    found = [x for f in _modules() for x in long_tuple_returns(f.read_text(), str(f.relative_to(ROOT)))]
+    assert not found, found
+
+
+def test_the_function_rules_see_what_they_should():
+    """The two checks above on code written to break them, and on code that does not."""
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION_LINES - 2))
+    fits = f"def f():\n{body}\n    return x0\n"  # exactly MAX_FUNCTION_LINES lines
+    assert long_functions(fits) == []
+    assert long_functions(fits.replace("return x0", "x = 1\n    return x0")) == [":1 f (81 lines)"]
+    assert long_functions(f"class A:\n    def g(self):\n        def h():\n{body.replace('    ', '            ')}\n"
+                          "            return 1\n            return 2\n        return h\n") == [":2 g (83 lines)", ":3 h (81 lines)"]
+    four = "def f(a):\n    return a, a, a, a\n"
+    assert long_tuple_returns(four) == [":2 f returns 4 values"]
+    assert long_tuple_returns("class A:\n    def m(self):\n        if self:\n            return 1, 2, 3, 4, 5\n        return 1\n") \
+        == [":4 m returns 5 values"]
+    assert long_tuple_returns("def f(a):\n    return a, a, a\n") == []
+    assert long_tuple_returns("def f(a):\n    def g():\n        return a, a, a, a\n    return g\n") == []
+    assert long_tuple_returns("def f(a):\n    return (a, a, a, *a)\n") == []
 
 
 def test_no_private_name_crosses_a_module_boundary():

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from collections.abc import Callable, Mapping
-from typing import Any, Protocol, Union
+from typing import Any, NamedTuple, Protocol, Union
 
 import jax.numpy as jnp
 
@@ -228,6 +228,16 @@ class DCMotor:
 
 
 # --------------------------------------------------------------------------- screw jack
+class ScrewThread(NamedTuple):
+    """A screw's thread at parameters ``p`` (``ScrewJack._get``): `lead` (m per turn), mean
+    diameter `d_m` (m), friction coefficient `f` (-), and ``sec`` of the thread half angle."""
+
+    lead: Any
+    d_m: Any
+    f: Any
+    sec: Any
+
+
 @dataclasses.dataclass(frozen=True)
 class ScrewJack:
     """Power screw (square or trapezoidal/Acme thread), collar friction neglected.
@@ -248,10 +258,10 @@ class ScrewJack:
     friction: Spec = "f"
     thread_angle: Spec = 0.0
 
-    def _get(self, p):
+    def _get(self, p) -> ScrewThread:
         l, dm, f = resolve(self.lead, p), resolve(self.mean_diameter, p), resolve(self.friction, p)
         sec = 1.0 / jnp.cos(resolve(self.thread_angle, p))
-        return l, dm, f, sec
+        return ScrewThread(l, dm, f, sec)
 
     def raise_torque(self, force, p):
         """Torque (N m) to raise (move against) axial load ``force`` (N)."""

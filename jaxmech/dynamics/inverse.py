@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -170,12 +171,22 @@ def statics(model: Model, u, p: Mapping, guess, *, t=0.0, options: SolverOptions
     return inverse_dynamics_at(model, u, zero, zero, p, guess, t=t, quasi_static=True, options=options)
 
 
+class AlongDrive(NamedTuple):
+    """``_along``'s result: the drive's inputs `u` and their rates ``(N, dof)``, and every
+    sample's dynamics `samples` (``_sample``'s mapping, leading axis N)."""
+
+    u: jax.Array
+    u_dot: jax.Array
+    u_ddot: jax.Array
+    samples: dict
+
+
 @functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
 def _along(model, quasi_static, names, drive_static, drive_leaves, p, t, q, d1, d2):
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, model.mechanism.dof)
     out = jax.vmap(lambda *a: _sample(model, quasi_static, names, p, *a))(t, u, ud, udd, q, d1, d2)
-    return u, ud, udd, out
+    return AlongDrive(u, ud, udd, out)
 
 
 def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, guess=None, *, quasi_static: bool = False,

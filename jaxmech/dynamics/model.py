@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable, Mapping, Sequence
+from typing import NamedTuple
 
 import jax.numpy as jnp
 
@@ -324,9 +325,23 @@ def angle_of(mech: Mechanism, spec, q, u, p):
     return jnp.asarray(spec(mech.vars_q(q), mech.vars_u(u), mech.vars_p(p)))
 
 
-def geometry(model: Model, q, u, p):
-    """Every pose the loads and inertia need at one state, as a flat tuple of lists of arrays
-    ``(r_G, phi, load points, load angles, axial lengths)`` (for nested jvp)."""
+class Geometry(NamedTuple):
+    """Every pose the loads and inertia need at one state (``geometry``), lists of arrays (a
+    pytree, for nested jvp; unpacks like the 5-tuple it replaces): the bodies' centres of
+    mass `r_g` (complex, m) and angles `phi` (rad), the points of the ``PointForce`` loads
+    (complex, m), the angles of the ``Moment`` loads (rad) and the lengths of the ``Axial``
+    loads (m), each in the model's load order."""
+
+    r_g: list
+    phi: list
+    load_points: list
+    load_angles: list
+    axial_lengths: list
+
+
+def geometry(model: Model, q, u, p) -> Geometry:
+    """Every pose the loads and inertia need at one state: a ``Geometry`` ``(r_G, phi, load
+    points, load angles, axial lengths)`` (for nested jvp)."""
     mech = model.mechanism
     rg = [point_of(mech, b.position, q, u, p) for b in model.bodies]
     ph = [angle_of(mech, b.angle, q, u, p) if b.angle is not None else jnp.zeros((), q.dtype) for b in model.bodies]
@@ -338,7 +353,7 @@ def geometry(model: Model, q, u, p):
             la.append(angle_of(mech, ld.angle, q, u, p))
         elif isinstance(ld, Axial):
             ll.append(jnp.abs(point_of(mech, ld.a, q, u, p) - point_of(mech, ld.b, q, u, p)))
-    return rg, ph, lp, la, ll
+    return Geometry(rg, ph, lp, la, ll)
 
 
 def masses(model: Model, p):

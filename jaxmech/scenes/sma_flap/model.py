@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -350,8 +351,19 @@ def rigid_wire_angle(eps, p, j: int = 1, near=0.0):
 
 
 # --------------------------------------------------------------------------- the scene
+class HingeOutputs(NamedTuple):
+    """Per sample and hinge (``_outputs_batch``): wire tensions `wire` and spring tensions
+    `spring` (N), NaN where the sample failed; the least eigenvalue of the stiffness
+    `stiffness_min` (N m/rad); each hinge's rigid-wire angle `rigid` (rad)."""
+
+    wire: jax.Array
+    spring: jax.Array
+    stiffness_min: jax.Array
+    rigid: jax.Array
+
+
 @functools.partial(jit, static_argnums=(0,))
-def _outputs_batch(n, p, q, eps):
+def _outputs_batch(n, p, q, eps) -> HingeOutputs:
     def one(th, e):
         tw, ts = wire_tensions(th, e, p, n)
         return tw, ts, _min_eig(stiffness(th, e, p, n_hinges=n))
@@ -360,7 +372,7 @@ def _outputs_batch(n, p, q, eps):
     tw, ts, kmin = jax.vmap(one)(jnp.where(ok[:, None], q, 0.0), eps)
     rigid = jnp.stack([jax.vmap(lambda e, j=j: rigid_wire_angle(e, p, j))(eps) for j in range(1, n + 1)], axis=-1)
     bad = lambda x: jnp.where(ok.reshape(ok.shape + (1,) * (x.ndim - 1)), x, jnp.nan)  # noqa: E731
-    return bad(tw), bad(ts), bad(kmin), rigid
+    return HingeOutputs(bad(tw), bad(ts), bad(kmin), rigid)
 
 
 def _outputs(p, mo):
