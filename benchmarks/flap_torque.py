@@ -16,7 +16,7 @@ largest *relative* error ``|T - T_ref| / |T_ref|`` over those points (the torque
 compile time reported apart; then a warm-up call and the median of repeated calls):
 
 - continuation (``inverse_dynamics`` = ``solve_stroke`` + ``generalized_forces``, vmapped) with
-  ``SolverOptions(max_steps=k)``, k = 1..8 and the default 80 in float64; k = 1, 2, 3, 8, 80
+  ``SolverOptions(max_iterations=k)``, k = 1..8 and the default 80 in float64; k = 1, 2, 3, 8, 80
   in float32 (a measured option only: its error floor is float32 rounding);
 - cold start (``inverse_dynamics_at``: every point solved on its own from the stroke-start
   guess), k = 1..8 and 80, float64;
@@ -119,7 +119,7 @@ def _jaxmech_rows(n, budgets, repeat, ref_alphas_idx, ref, quick):
         pp = {k: jnp.asarray(v, dt) for k, v in p64.items()}
         gg = jnp.asarray(g64, dt)
         for k in budgets["cont64" if dtype == "float64" else "cont32"]:
-            opts = jm.SolverOptions(max_steps=k)
+            opts = jm.SolverOptions(max_iterations=k)
 
             def cont(t, p, g, opts=opts):
                 drive = jm.ConstantSpeed(jnp.asarray(a0, t.dtype), jnp.asarray(1.0, t.dtype))
@@ -131,7 +131,7 @@ def _jaxmech_rows(n, budgets, repeat, ref_alphas_idx, ref, quick):
 
         # cold start: every point from the stroke-start guess, on its own
         for k in (budgets["cold64"] if dtype == "float64" else ()):
-            opts = jm.SolverOptions(max_steps=k)
+            opts = jm.SolverOptions(max_iterations=k)
 
             def cold(t, p, g, opts=opts):
                 u = a0 + t

@@ -5,7 +5,7 @@ subsample of the crank positions), for N positions of one design:
 
 - Newton iteration budget 1..8: a fixed-count Newton on jaxmech's residual, started from the
   continuation predictor's guess (the previous position's solution), float64 and float32;
-  beside it the success rate of ``jaxmech.solve`` with ``max_steps = k``;
+  beside it the success rate of ``jaxmech.solve`` with ``max_iterations = k``;
 - float32 against float64 for the full ``stroke_kinematics`` path;
 - cold start (``solve``, one fixed guess for every position) against continuation
   (``solve_stroke``): time, error, status counts (a cold start may close on the wrong
@@ -120,11 +120,11 @@ def run(quick: bool = False) -> dict:
             err_row(f"newton_fixed_k{k}_{jnp.dtype(dtype).name}", t["median_s"], f(us, g, p), compile_s=ct,
                     family=f"fixed-budget Newton {jnp.dtype(dtype).name}", budget=k, dtype=jnp.dtype(dtype).name)
 
-    # jaxmech.solve with max_steps = k: its success rate (unconverged samples are NaN + status)
+    # jaxmech.solve with max_iterations = k: its success rate (unconverged samples are NaN + status)
     g64 = jnp.asarray(np.stack(prev_np[:2], -1) + 1e-2)
     p64 = {kk: jnp.asarray(v) for kk, v in DESIGN.items()}
     for k in range(1, 9):
-        opts = jm.SolverOptions(max_steps=k)
+        opts = jm.SolverOptions(max_iterations=k)
 
         def s(us, g, p, opts=opts):
             sol = jm.solve(mech, us, p, g, options=opts)

@@ -53,7 +53,7 @@ from .mechanism import Vars as Vars
 from .mechanism import cis as cis
 from .solution import Solution as Solution
 from .options import SolverOptions as SolverOptions
-from .implicit import implicit_root as implicit_root
+from .implicit import implicit_positions as implicit_positions
 from .positions import solve as solve
 from .positions import solve_one as solve_one
 from .status import Status as Status
@@ -61,6 +61,17 @@ from .status import status_counts as status_counts
 from .status import status_message as status_message
 
 from .cache import enable_compile_cache as enable_compile_cache
+
+
+def __getattr__(name):
+    """Deprecated top-level names: ``jaxmech.implicit_root`` is ``jaxmech.implicit_positions``."""
+    if name == "implicit_root":
+        import warnings
+
+        warnings.warn("jaxmech.implicit_root is deprecated: use jaxmech.implicit_positions", DeprecationWarning, stacklevel=2)
+        return implicit_positions
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 try:
     __version__ = _version("jaxmech")

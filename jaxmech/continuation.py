@@ -1,17 +1,29 @@
-"""Strokes by continuation: anchors, a guarded predictor, gaps, and stroke kinematics.
+"""Strokes by continuation: blocks walked by one scan, a guarded predictor, gaps, a
+reverse walk, and the public ``solve_stroke``.
 
 A stroke ``us (N, dof)`` is cut into blocks of ``k`` consecutive points.  A ``lax.scan``
-walks the blocks in order; the last point of each solved block is the *anchor* of the
-next: its root ``q`` and the implicit derivatives ``dq/du``, ``d2q/du2`` there give every
-point of the next block a second-order predicted guess, and the one Newton kernel
-(``newton.newton``) solves the whole block at once (vectorised over its points and over
-the designs).  So one compiled kernel serves anchors and points alike, and a block whose
-guesses are good (a smooth stroke) takes one Newton step per point.
+walks the blocks in order (``stroke_stages.walk_block``); the last point of each solved
+block is the *anchor* of the next: its root ``q`` and the implicit derivatives ``dq/du``,
+``d2q/du2`` there give every point of the next block a second-order predicted guess
+(``stroke_point.predict``), and one checked Newton step per point solves the whole block at
+once (vectorised over its points and over the designs); points that fail it are solved by
+the robust kernel (``stroke_point.assemble``).  A block whose guesses are good (a smooth
+stroke) takes one Newton step per point.
 
 Gaps (stretches where the mechanism cannot be assembled): an anchor that failed is never
 used.  The last trusted anchor is kept, and once a block ends in failure its derivatives
 are dropped, so the points after a gap restart from the last trusted pose itself (damped
 Newton, branch guard) instead of a Taylor series extrapolated across the gap.
+
+The reverse walk: a stroke that re-enters the assemblable range does so at a toggle,
+where the requested branch's poses exist but are hard to reach from the last pose before
+the gap (Newton's steps there run across the fold to the other branch); they are easy to
+reach from the well-conditioned stretch after them.  So where a design has a failed point
+followed by a converged one, the same scan walks the stroke once more in reverse, from that
+design's last converged pose, and the points it solves on the requested branch that the
+forward walk did not take its answer (``merge_reverse``).  It is part of the one compiled
+program (the scan's second half, skipped block by block when no design needs it), so a
+stroke gives the same statuses and values eager and under a user's ``jax.jit``.
 
 Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
 a few sizes per octave, so 361 and 362 points share one compiled program.
@@ -26,164 +38,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .linalg import cond1, small_max, small_norm, solve_blocks, where
-from .xla import jit, unfused
-from .mechanism import Mechanism
-from .structure import blocks
-from .implicit import attach_derivatives, implicit_root, root_derivatives
+from .branches import branch_names, branch_value, flipped_mask, has_branch
+from .implicit import implicit_input_derivatives, implicit_positions
 from .inputs import batch_shape, prepare
-from .branches import branch_names, branch_value, flipped_mask, has_branch, on_branch
-from .newton import coord_scales, evaluator, newton, per_lane
-from .options import SolverOptions, tolerances
-from .solution import Solution, raise_if_failed
+from .linalg import where
+from .mechanism import Mechanism
+from .newton import coord_scales
+from .options import SolverOptions
+from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
+from .stroke_point import assemble, checked_step, predict
+from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step
+from .xla import jit, unfused
 
-__all__ = ["solve_stroke", "stroke", "predict", "bucket", "assemble", "checked_step"]
-
-
-# --------------------------------------------------------------------------- predictor
-def _series_terms(d1, d2, du):
-    """``(q' du, q'' du du / 2)`` as elementwise products and sums over the (few) inputs: a
-    ``dot`` under ``vmap`` is lowered by XLA according to the batch size, with a rounding
-    that depends on it, and a stroke's result must not depend on its batch."""
-    first = jnp.sum(d1 * du, axis=-1)
-    second = 0.5 * jnp.sum(d2 * du[:, None] * du[None, :], axis=(-2, -1))
-    return first, second
-
-
-def _trusted_terms(d1, d2, du, s, max_step):
-    """``(d1, d2)`` with the terms the Taylor series cannot be trusted with over ``du`` zeroed.
-
-    Near a singular position the series diverges (there ``q''`` is huge: a flap design
-    that starts near a toggle had its second-order term predict 2000 rad, and Newton then
-    converged to the same pose 319 turns away, where angle-dependent loads are wrong).  So
-    the second-order term is kept only while it is under a quarter of the first-order one
-    (scaled max norms: the series is then converging), and a step of more than ``max_step``
-    (scaled, as Newton's) is not predicted at all: the anchor itself is the guess.
-    """
-    first, second = _series_terms(d1, d2, du)
-    size = lambda x: small_max(jnp.abs(x) / s)  # noqa: E731
-    keep2 = size(second) <= 0.25 * size(first)
-    step = where(keep2, first + second, first)
-    keep1 = size(step) <= max_step
-    return where(keep1, d1, 0.0), where(keep1 & keep2, d2, 0.0)
-
-
-def predict(q, d1, d2, du, s, max_step):
-    """Guarded second-order predictor ``q + q' du + q'' du du / 2`` from a solved anchor
-    (``q (m,)``, ``d1 (m, dof)``, ``d2 (m, dof, dof)``) over ``du (dof,)``, with the terms
-    its series cannot be trusted with dropped.  ``s``: coordinate scales (``newton.coord_scales``)."""
-    d1, d2 = _trusted_terms(d1, d2, du, s, max_step)
-    first, second = _series_terms(d1, d2, du)
-    return q + first + second
-
-
-# --------------------------------------------------------------------------- one checked step
-def _lean_xtol(opts: SolverOptions, dtype):
-    """Step test of ``checked_step``.  Derivatives are taken at its iterate, one Newton step
-    ``dz`` from the reported root, and they move by ``|dz|`` times the curvature;
-    ``dz <= 1e4 eps`` keeps that below 1e-9 relative up to a condition number of ~1e3
-    (beyond which the robust kernel re-solves the point anyway)."""
-    return min(tolerances(opts, dtype)[0], 1e4 * float(jnp.finfo(dtype).eps))
-
-
-def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
-    """One plain Newton step from a close (predicted) guess, then the convergence,
-    conditioning, finiteness and branch tests of ``newton.newton``: straight-line code for
-    the common case of a stroke point; the points that fail it go to ``newton.newton``.
-
-    Returns ``(q1, q, ok, residual, cond, branch)``: ``q1`` is the iterate the tests (and the
-    derivatives) are evaluated at, always finite; ``q = q1 - dz`` adds the next step.
-    """
-    dtype = guess.dtype
-    _, ftol, cond_max = tolerances(opts, dtype)
-    evaluate, s = evaluator(mech, u, p, dtype)
-    r, js = evaluate(guess)
-    order = blocks(mech)  # block-triangular solves (structure.py)
-    q = guess - solve_blocks(js, r, order) * s
-    finite_q = jnp.all(jnp.isfinite(q))
-    q = where(finite_q, q, jnp.zeros_like(q))
-    r, js = evaluate(q)
-    dz = solve_blocks(js, r, order)
-    rn = small_norm(r)
-    cond = cond1(js, order)
-    br = branch_value(mech, q, u, p, js)
-    ok = (small_max(jnp.abs(dz)) <= _lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
-    ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch(b0, br)
-    qf = where(ok, q - dz * s, q)
-    # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
-    packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
-    return q, packed[:-1], packed[-1] > 0.5, rn, cond, br
-
-
-# --------------------------------------------------------------------------- restarts
-#: Starts of ``assemble`` besides the guess: fixed offsets from the reference pose, in
-#: half-turns for angles and length scales for lengths (deterministic, so a stroke's result
-#: does not depend on anything but its inputs).  14: with 6, 1 in ~20 random six-bars
-#: crossing gaps left a stretch after a gap on the other branch of a loop; with 14, none of
-#: 210 did (tried one after another only while a point is unresolved: the count costs
-#: run time only where the guess fails, and no compile time).
-_STARTS = 14
-
-
-def _offsets(m: int) -> np.ndarray:
-    return np.random.default_rng(20261124).uniform(-1.0, 1.0, (_STARTS, m))
-
-
-def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False):
-    """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
-    from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
-
-    ``newton.newton`` runs from one start after another until a root on the branch is
-    found: the guess (the anchor itself where the predicted guess is off the branch), the
-    guess again with a tenth of the step cap (which keeps Newton on the near side of a fold,
-    a toggle the stroke re-enters at, where full steps overshoot), then ``_STARTS`` fixed
-    offsets around ``ref``: the fresh assembly a stroke needs after a gap, where no pose
-    near the last trusted one exists to continue from.  One call site of the kernel, in a
-    ``while_loop``: under ``vmap`` a block whose points all close from their guesses costs
-    one Newton solve, as without restarts, and finished lanes skip the later starts.  The
-    best answer is kept: a root on the branch, else one that exists only on another branch
-    (``BRANCH`` says more than a stall), else the guess's own status; the earliest start
-    wins a tie.  Angles are then moved by whole turns to lie within half a turn of the
-    guess (where the equations allow it: checked on the residual), so a stroke's angles are
-    continuous as numbers.
-
-    ``inputs_finite``: as for ``newton`` (the stroke program sanitises its inputs once).
-
-    Returns ``(q, status, steps, residual, cond, branch)`` like ``newton`` (no ``flipped``).
-    """
-    dtype = guess.dtype
-    s = coord_scales(mech, p, dtype)
-    angle = ~jnp.asarray(mech.coord_is_length())
-    g0 = where(on_branch(target, branch_value(mech, guess, u, p)), guess, ref) if has_branch(mech) else guess
-    table = ref[None] + jnp.asarray(_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
-    last = _STARTS + 2
-    score = lambda st: where(st == Status.CONVERGED, 2, where(st == Status.BRANCH, 1, 0))  # noqa: E731
-
-    def wanted(carry):
-        j, best = carry
-        return (j < last) & (best[-1] < 2)
-
-    def attempt(carry):
-        j, best = carry
-        g = where(j < 2, g0, table[jnp.clip(j - 2, 0, _STARTS - 1)])
-        cap = where(j == 1, 0.1 * opts.max_step, opts.max_step).astype(dtype)
-        q, st, steps, rn, cond, br, _ = newton(mech, opts, u, p, g, target, cap, skip=~wanted(carry), inputs_finite=inputs_finite)
-        new = (q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br, score(st))
-        take = wanted(carry) & (new[-1] > best[-1])
-        return j + 1, jax.tree_util.tree_map(lambda a, b: where(take, a, b), new, best)
-
-    zero = jnp.zeros((), dtype)
-    none = (guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero, branch_value(mech, guess, u, p), jnp.asarray(-1))
-    init = per_lane((jnp.zeros((), jnp.int32), none), jnp.all(jnp.isfinite(guess)))
-    _, (q, st, steps, rn, cond, br, _) = jax.lax.while_loop(wanted, attempt, init)
-    # Whole turns towards the guess, kept only if the equations do not notice them.
-    turns = where(angle, jnp.round((q - guess) / (2 * jnp.pi)), 0.0)
-    q_w = q - 2 * jnp.pi * turns
-    _, ftol, _ = tolerances(opts, dtype)
-    r_w = mech.residual(q_w, u, p) / mech.residual_scales(p, dtype)
-    q = where((st == Status.CONVERGED) & (small_norm(r_w) <= jnp.maximum(ftol, 2 * rn)), q_w, q)
-    return q, st, steps, rn, cond, br
+__all__ = ["solve_stroke", "stroke", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -194,226 +62,186 @@ def bucket(n: int) -> int:
     return -(-int(n) // (1 << e)) << e
 
 
-def _block_size(n: int, anchors: int) -> int:
+def block_size(n: int, anchors: int) -> int:
     """Stroke points per block for ``n`` points and (at most about) ``anchors`` anchors."""
     return max(1, -(-(n - 1) // max(1, anchors)))
 
 
-# --------------------------------------------------------------------------- the stroke program
-@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
-def _stroke_program(mech, options, derivs, single, us, p, guess):
-    """Strokes of D designs: ``us (N, dof)`` shared or ``(D, N, dof)`` one per design
-    (bucketed), ``p`` leaves ``(D,)``, ``guess (D, m)``.
+def block_layout(x, k: int, nblk: int):
+    """Per-point values ``x (..., N, c)`` (inputs, flags) as blocks: block 0 is point 0
+    repeated ``k`` times (its last entry is the first anchor, solved from the user's guess),
+    blocks 1.. hold points 1..N-1, the last padded by repeating point N-1.  Returns
+    ``(nblk + 1, ..., k, c)``."""
+    n, dof = x.shape[-2:]
+    lead = x.shape[:-2]
+    pad = jnp.broadcast_to(x[..., -1:, :], lead + (nblk * k - (n - 1), dof))
+    rest = jnp.concatenate([x[..., 1:, :], pad], axis=-2) if n > 1 else x[..., :0, :]
+    out = jnp.concatenate([jnp.broadcast_to(x[..., :1, :], lead + (k, dof)), rest], axis=-2)
+    return jnp.moveaxis(out.reshape(lead + (nblk + 1, k, dof)), -3, 0)
 
-    Returns ``(q, status, steps, residual, cond, branch, flipped, d1, d2)`` with ``(D, N)`` in front
-    (the design axis dropped with ``single``); ``d1``, ``d2`` are None without ``derivs``.
-    NaN where the status is not ``CONVERGED``.
-    """
+
+def block_points(nb: int, k: int, nblk: int) -> np.ndarray:
+    """``(nblk + 1, k)``: the stroke point each block entry reports (``-1``: block 0's
+    repeats, or padding past the last point)."""
+    idx = np.concatenate([np.full(k - 1, -1), np.arange(nblk * k + 1)])
+    return np.where(idx < nb, idx, -1).reshape(nblk + 1, k)
+
+
+def unblock(x, d: int, k: int, nb: int):
+    """``(nblk + 1, D, k, ...)`` scan outputs -> ``(D, nb, ...)``: point 0 is block 0's last entry."""
+    return jnp.moveaxis(x, 0, 1).reshape((d, x.shape[0] * k) + x.shape[3:])[:, k - 1 : k - 1 + nb]
+
+
+# --------------------------------------------------------------------------- the program's parts
+def stroke_setup(mech, options, derivs, us, p, guess):
+    """``(StrokeSetup, us, guess)`` with non-finite inputs, parameters and guesses replaced
+    once, here, by harmless values (their samples are flagged later): no derivative code
+    ever sees a NaN that could leak into a batch gradient."""
     stop = jax.lax.stop_gradient
-    m = mech.m
-    d = guess.shape[0]
-    dtype = guess.dtype
-    n, dof = us.shape[-2:]
-    # A stroke shared by every design stays one array: a block's inputs are then not batched
-    # over the designs, which keeps the steady-state program as small as it was (a shared
-    # stroke broadcast per design cost 8-70% of the run time, measured).
-    shared = us.ndim == 2
-    ax = None if shared else 0  # the design axis of a block's inputs
-    # Non-finite inputs and parameters are replaced once, here, by harmless values (their
-    # samples are flagged): no derivative code ever sees a NaN that could leak into a batch
-    # gradient.
-    us_fin = jnp.all(jnp.isfinite(us), axis=-1)  # (N,) or (D, N)
+    d, dtype = guess.shape[0], guess.dtype
     us_s = where(jnp.isfinite(us), us, 0.0)
     # The parameters as one (n_params, D) array: one reduction says which designs are finite.
     # Tested one by one, XLA's CPU fusion copied the chain of tests into every consumer of
     # the status (flap_msd, 29 parameters: 1,000 is-finite instructions in the program).
     pv = jnp.stack(list(p.values())) if p else jnp.zeros((0, d), dtype)
-    p_fin = jnp.all(jnp.isfinite(pv), axis=0)
-    p_s = dict(zip(p, unfused(where(jnp.isfinite(pv), pv, 1.0)))) if p else {}
-    ps = jax.tree_util.tree_map(stop, p_s)
+    ps = jax.tree_util.tree_map(stop, dict(zip(p, unfused(where(jnp.isfinite(pv), pv, 1.0)))) if p else {})
     g0 = stop(where(jnp.isfinite(guess), guess, 0.0))
-
-    # Blocks: block 0 is the first input repeated (its last point is the first anchor, solved
-    # from the user's guess); blocks 1.. cover points 1..n-1, the last padded by repetition.
-    k = _block_size(n, options.anchors)
-    nblk = -(-(n - 1) // k) if n > 1 else 0
-    lead = us_s.shape[:-2]  # () or (D,)
-    rest = jnp.concatenate([us_s[..., 1:, :], jnp.broadcast_to(us_s[..., -1:, :], lead + (nblk * k - (n - 1), dof))], axis=-2) if n > 1 else us_s[..., :0, :]
-    blocks = jnp.concatenate([jnp.broadcast_to(us_s[..., :1, :], lead + (k, dof)), rest], axis=-2)
-    blocks = jnp.moveaxis(blocks.reshape(lead + (nblk + 1, k, dof)), -3, 0)  # (nblk + 1, [D,] k, dof)
-    u_first = jnp.broadcast_to(us_s[..., 0, :], (d, dof))
-
+    u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
     if has_branch(mech):
         b0 = jnp.sign(jax.vmap(lambda g_, u_, p_: branch_value(mech, g_, u_, p_))(g0, u_first, ps))
     else:
         b0 = jnp.zeros((d,), dtype)
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
+    return StrokeSetup(mech, options, bool(derivs), us.ndim == 2, ps, b0, scales), us_s, g0
 
-    def guesses(q_a, d1_a, d2_a, u_a, b_, p_, s_, u_blk):
-        """One design's block of guesses ``(k, m)`` from its anchor's guarded predictor; the
-        series is checked once, over the block's farthest point (its last)."""
-        d1_t, d2_t = _trusted_terms(d1_a, d2_a, u_blk[-1] - u_a, s_, options.max_step)
 
-        def one(u):
-            first, second = _series_terms(d1_t, d2_t, u - u_a)
-            return q_a + first + second
+def inputs_finite(us, p, guess):
+    """``(D, N)``: the points whose input, design parameters and guess are all finite."""
+    d = guess.shape[0]
+    pv = jnp.stack(list(p.values())) if p else jnp.zeros((0, d), guess.dtype)
+    return jnp.all(jnp.isfinite(pv), axis=0)[:, None] & jnp.all(jnp.isfinite(us), axis=-1) & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
 
-        return jax.vmap(one)(u_blk)
 
-    def per_block(fn, u_blk, *args):
-        """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points
-        (inner), ``(D, k, ...)`` in and out: what depends on the parameters alone is computed
-        once per design (the checked step: 8% of the steady-state stroke, measured)."""
-        return jax.vmap(lambda u_d, p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_d, *pts), (ax, 0, 0) + (0,) * len(args))(u_blk, ps, b0, *args)
+def empty_points(setup: StrokeSetup, g0, u_first, k: int) -> PointResults:
+    """Zeros shaped like one block's ``PointResults`` (what a skipped reverse block outputs)."""
+    mech, (d, m), dtype = setup.mech, g0.shape, g0.dtype
+    dof = u_first.shape[-1]
+    br = jax.eval_shape(jax.vmap(lambda g_, u_, p_: branch_value(mech, g_, u_, p_)), g0, u_first, setup.p)
+    z = lambda *shape: jnp.zeros((d, k) + shape, dtype)  # noqa: E731
+    i = jnp.zeros((d, k), jnp.int32)
+    derivs = (z(m, dof), z(m, dof, dof)) if setup.derivs else (None, None)
+    return PointResults(z(m), i, i, z(), z(), jnp.zeros((d, k) + br.shape[1:], br.dtype), *derivs)
 
-    def per_point(fn, u_blk, *args):
-        """``per_block`` as one ``vmap`` over designs x points (the parameters repeated per
-        point), for the robust kernel: JAX batches a ``while_loop`` (Newton's, ``assemble``'s)
-        by re-tracing its body to a fixed point at every ``vmap`` level, and two nested levels
-        were half the stroke's trace."""
-        kk = u_blk.shape[-2]
-        flat = lambda x: x.reshape((d * kk,) + x.shape[2:])  # noqa: E731
-        rep = lambda x: jnp.repeat(x, kk, axis=0)  # noqa: E731
-        out = jax.vmap(fn)(flat(jnp.broadcast_to(u_blk, (d, kk, dof))), jax.tree_util.tree_map(rep, ps), rep(b0), *map(flat, args))
-        return jax.tree_util.tree_map(lambda x: x.reshape((d, kk) + x.shape[1:]), out)
 
-    def robust(u_blk, g, q_a):
-        """The full Newton kernel for every point of a block (run only for a block where the
-        checked step failed somewhere: one ``lax.cond`` per block), from several starts."""
+def reverse_points(x, n, fill=None):
+    """``x (..., nb, ...)`` (points on axis ``-2`` without ``fill``, else axis 1) with its
+    first ``n`` points in reverse order (``n`` traced): a flip and a dynamic slice, not a
+    gather (a gather per field cost hundreds of lines of the program).  The entries past
+    ``n`` are ``fill`` (``(..., 1, dof)``) where given, else unspecified."""
+    axis = -2 if fill is not None else 1
+    nb = x.shape[axis]
+    f = jnp.flip(x, axis)
+    out = jax.lax.dynamic_slice_in_dim(jnp.concatenate([f, f], axis), nb - n, nb, axis % x.ndim)
+    if fill is None:
+        return out
+    return where((jnp.arange(nb) < n)[:, None], out, fill)
 
-        def one(u, p_, b_, g_, q_a):
-            q, st, steps, rn, cond, br = assemble(mech, options, u, p_, g_, q_a, b_, inputs_finite=True)
-            return q, st.astype(jnp.int32), steps.astype(jnp.int32), rn, cond, br
 
-        return per_point(one, u_blk, g, jnp.broadcast_to(q_a[:, None], g.shape))
+def walk_inputs(setup: StrokeSetup, us_s, valid, n, k: int, nblk: int):
+    """``(BlockInput, us_r)``: the scan's inputs, the forward blocks then the reverse walk's,
+    and the reversed stroke ``us_r`` (the stroke's ``n`` points reversed, padded with point 0:
+    ``n`` is traced, one program serves a bucket)."""
+    nb = us_s.shape[-2]
+    idx = block_points(nb, k, nblk)
+    # the inputs' block layout (no gather), less block 0's repeats and the padding
+    valid_f = block_layout(valid[..., None], k, nblk)[..., 0] & ((idx >= 0)[:, None] & (jnp.asarray(idx)[:, None] < n))
+    us_r = reverse_points(us_s, n, fill=us_s[..., :1, :])
+    flags = np.arange(2 * (nblk + 1)) >= nblk + 1
+    return BlockInput(
+        u=jnp.concatenate([block_layout(us_s, k, nblk), block_layout(us_r, k, nblk)]),
+        valid=jnp.concatenate([valid_f, jnp.zeros_like(valid_f)]),
+        reverse=jnp.asarray(flags),
+        restart=jnp.asarray(np.arange(2 * (nblk + 1)) == nblk + 1),
+    ), us_r
 
-    # A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
-    @jax.jit
-    def derivatives_of(q, u, p_, ok):
-        return jax.vmap(jax.vmap(lambda q_, u_, p1, ok_: root_derivatives(mech, q_, u_, p1, ok_), (0, 0, None, 0)), (0, ax, 0, 0))(q, u, p_, ok)
 
-    def derivatives(q, u, ok):
-        return derivatives_of(q, u, ps, ok)
+def merge_reverse(mech: Mechanism, fwd: PointResults, back: PointResults, need, n, valid) -> PointResults:
+    """The forward walk's points, ``(D, nb, ...)``, where a design that ``need``s it takes the
+    reverse walk's answer (``back``, in reversed order) at the points the forward walk did
+    not solve (``valid``: finite inputs) and the reverse walk solved on the branch.
 
-    def scan_fn(carry, u_blk):
-        q_a, d1_a, d2_a, u_a = carry
-        g = jax.vmap(guesses, (0, 0, 0, 0, 0, 0, 0, ax))(q_a, d1_a, d2_a, u_a, b0, ps, scales, u_blk)
-        q1, qf, ok, rn, cond, br = per_block(lambda u, p_, b_, g_: checked_step(mech, options, u, p_, g_, b_), u_blk, g)
-        status = where(ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
+    The reverse walk may count turns differently: each run it filled is shifted by the whole
+    turns that match it to the forward walk at the converged point that follows the run
+    (where both walks found the same pose), so the angles stay continuous as numbers.
+    """
+    nb = fwd.status.shape[1]
+    i = jnp.arange(nb)
+    back = jax.tree_util.tree_map(lambda x: reverse_points(x, n), back)
+    conv_f = (fwd.status == Status.CONVERGED) & valid
+    conv_b = back.status == Status.CONVERGED
+    take = need[:, None] & ~conv_f & conv_b & (i < n)
+    merged = PointResults(*(None if f is None else where(take.reshape(take.shape + (1,) * (f.ndim - 2)), b, f) for f, b in zip(fwd, back)))
+    # r1: the first point at or after each one that the reverse walk did not fill; one
+    # gather reads both walks' agreement and turn difference there
+    r1 = jax.lax.cummin(jnp.where(take, nb, i), axis=1, reverse=True)
+    both = (conv_f & conv_b)[..., None].astype(fwd.q.dtype)
+    at_r1 = jnp.take_along_axis(jnp.concatenate([fwd.q - back.q, both], axis=-1), jnp.clip(r1, 0, nb - 1)[..., None], axis=1)
+    joined = take & (r1 < n) & (at_r1[..., -1] > 0.5)
+    angle = ~jnp.asarray(mech.coord_is_length())
+    turns = jnp.round(at_r1[..., :-1] / (2 * jnp.pi))
+    return merged._replace(q=merged.q + where(joined[..., None] & angle, 2 * jnp.pi * turns, 0.0))
 
-        def with_derivatives(q_eval, good):
-            if derivs:  # every point's dq/du and d2q/du2 (the last one's also serve the next anchor)
-                d1, d2 = derivatives(where(good[..., None], q_eval, 0.0), u_blk, good)
-                return d1, d2, d1[:, -1], d2[:, -1]
-            e1, e2 = derivatives(where(good[:, -1:, None], q_eval[:, -1:], 0.0), u_blk[..., -1:, :], good[:, -1:])
-            return None, None, e1[:, 0], e2[:, 0]
 
-        # derivatives at the checked step's iterate share its sines and cosines
-        fields = (qf, status, jnp.ones(ok.shape, jnp.int32), rn, cond, br) + with_derivatives(q1, ok)
-
-        def fallback(fields):
-            # Points the checked step accepted keep every value it gave (so a point's result
-            # never depends on which other designs share its block); the rest take the
-            # robust kernel's root, with derivatives there.
-            q_r, *rest = robust(u_blk, g, q_a)
-            st_r = rest[0]
-            new = (q_r, *rest) + with_derivatives(q_r, st_r == Status.CONVERGED)
-            keep = fields[1] == Status.CONVERGED
-
-            def pick(a_, b_, k_):
-                return None if a_ is None else where(k_.reshape(k_.shape + (1,) * (a_.ndim - k_.ndim)), a_, b_)
-
-            # every field is per point but the last two (the next anchor's derivatives)
-            masks = (keep,) * (len(fields) - 2) + (keep[:, -1],) * 2
-            return tuple(pick(a_, b_, k_) for a_, b_, k_ in zip(fields, new, masks))
-
-        qf, status, steps, rn, cond, br, d1, d2, e1, e2 = jax.lax.cond(jnp.any(~ok), fallback, lambda f: f, fields)
-        # A failed block end is never an anchor: keep the last trusted pose, and drop its
-        # derivatives (root_derivatives gives zeros where the point failed), so the next
-        # block restarts from that pose instead of a series extrapolated across the gap.
-        last_ok = status[:, -1] == Status.CONVERGED
-        q_next = where(last_ok[:, None], qf[:, -1], q_a)
-        u_next = where(last_ok[:, None], u_blk[..., -1, :], u_a)
-        return (q_next, e1, e2, u_next), (qf, status, steps, rn, cond, br, d1, d2)
-
-    init = (g0, jnp.zeros((d, m, dof), dtype), jnp.zeros((d, m, dof, dof), dtype), u_first)
-    _, out = jax.lax.scan(scan_fn, init, blocks)
-    # (nblk + 1, D, k, ...) -> (D, n, ...): point 0 is block 0's last entry
-    out = jax.tree_util.tree_map(lambda x: jnp.moveaxis(x, 0, 1).reshape((d, (nblk + 1) * k) + x.shape[3:])[:, k - 1 : k - 1 + n], out)
-    q, status, steps, rn, cond, br, d1, d2 = out
-    inputs_ok = p_fin[:, None] & us_fin[..., :n] & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
-    status = where(inputs_ok, status, Status.NONFINITE).astype(jnp.int32)
-    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(b0, br) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
+def attach(mech: Mechanism, setup: StrokeSetup, pts: PointResults, inputs_ok, u_out, p):
+    """``(Solution, d1, d2)``: statuses of non-finite inputs, branch flips, NaN where not
+    ``CONVERGED``, and the roots (and derivatives, None without) attached to ``(u, p)`` by
+    the implicit function theorem."""
+    status = where(inputs_ok, pts.status, Status.NONFINITE).astype(jnp.int32)
+    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(setup.b0, pts.branch) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
     flipped = where(status == Status.BRANCH, flipped, 0)
     ok = status == Status.CONVERGED
-    q_star = where(ok[..., None], q, jnp.nan)
-
-    # Attach the roots to (u, p): derivatives by the implicit function theorem.
-    u_out = us_s[..., :n, :]
-    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_root(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, ax, 0))(q_star, ok, u_out, p)
-    if derivs:
+    q_star = where(ok[..., None], pts.q, jnp.nan)
+    ax = setup.ax
+    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_positions(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, ax, 0))(q_star, ok, u_out, p)
+    d1, d2 = pts.d1, pts.d2
+    if setup.derivs:
         d1 = where(ok[..., None, None], d1, jnp.nan)
         d2 = where(ok[..., None, None, None], d2, jnp.nan)
-        d1, d2 = jax.vmap(jax.vmap(lambda *a: attach_derivatives(mech, *a), (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, ax, 0))(d1, d2, q_star, ok, u_out, p)
-    res = (q, status, steps, rn, cond, br, flipped, d1, d2)
-    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
+        one = lambda *a: implicit_input_derivatives(mech, *a)  # noqa: E731
+        d1, d2 = jax.vmap(jax.vmap(one, (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, ax, 0))(d1, d2, q_star, ok, u_out, p)
+    sol = Solution(q=q, status=status, steps=pts.steps, residual=pts.residual, cond=pts.cond, branch=pts.branch,
+                   flipped=flipped, coords=mech.coords, branches=branch_names(mech))
+    return sol, d1, d2
 
 
-def _backward(mech, options, derivs, single, us, p, guess, out, n):
-    """Points that failed after a gap, solved again by continuation from the other side.
+# --------------------------------------------------------------------------- the stroke program
+@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
+def _stroke_program(mech, options, derivs, single, us, p, guess, n):
+    """Strokes of D designs: ``us (nb, dof)`` shared or ``(D, nb, dof)`` one per design
+    (bucketed: the first ``n`` points are the stroke), ``p`` leaves ``(D,)``, ``guess (D, m)``.
 
-    A stroke that re-enters the assemblable range does so at a toggle, where the requested
-    branch's poses exist but are hard to reach from the last pose before the gap (Newton's
-    steps there run across the fold to the other branch).  The same poses are easy to reach
-    from the well-conditioned stretch after them: so where a design has a failed point
-    followed by a converged one, the stroke is walked once more in reverse, from that
-    design's last converged pose, by the same compiled program (same shapes), and the
-    points it solves on the requested branch that the forward pass did not take its answer.
-    Concrete arguments only (the decision is made on the host); inside a user's trace the
-    forward pass stands, and its failures keep their statuses.
+    Returns ``(Solution, d1, d2)`` with ``(D, nb)`` in front (the design axis dropped with
+    ``single``; ``d1``, ``d2`` None without ``derivs``).  The forward walk and the reverse walk are one scan over the blocks of the
+    stroke and then of the reversed stroke (``stroke_stages.stroke_step``).
     """
-    nb = us.shape[-2]  # the bucketed stroke length
-    status = np.asarray(out[1]).reshape(-1, nb)[:, :n]
-    conv = status == Status.CONVERGED
-    # a failed point with a converged one after it
-    later = np.flip(np.logical_or.accumulate(np.flip(conv, 1), 1), 1)
-    need = np.any(~conv[:, :-1] & later[:, 1:], axis=1)
-    if not np.any(need):
-        return out
-    last = n - 1 - np.argmax(np.flip(conv, 1), axis=1)
-    q = np.asarray(out[0]).reshape(-1, nb, mech.m)
-    start = np.where(need[:, None], q[np.arange(q.shape[0]), last], np.asarray(guess))
-    order = np.concatenate([np.arange(n - 1, -1, -1), np.zeros(nb - n, int)])
-    back = _stroke_program(mech, options, derivs, single, jax.device_put(np.take(np.asarray(us), order, axis=-2)), p, jax.device_put(start.reshape(np.shape(guess))))
-    axis = 0 if single else 1
-    undo = np.concatenate([np.arange(n - 1, -1, -1), np.arange(n, nb)])  # reversed index of each point
-    status_b = np.asarray(back[1]).reshape(-1, nb)[:, undo][:, :n]
-    take = need[:, None] & ~conv & (status_b == Status.CONVERGED)
-    take = np.concatenate([take, np.zeros((take.shape[0], nb - n), bool)], axis=1)
-    take = take[0] if single else take
-
-    def merge(f, b):
-        if f is None:
-            return None
-        f, b = np.asarray(f), np.take(np.asarray(b), undo, axis=axis)
-        return np.where(take.reshape(take.shape + (1,) * (f.ndim - take.ndim)), b, f)
-
-    merged = [merge(f, b) for f, b in zip(out, back)]
-    # The reverse walk may count turns differently: shift each run it filled by the whole
-    # turns that match it to the forward pass at the converged point that follows the run
-    # (where both passes found the same pose), so the angles stay continuous as numbers.
-    qf = np.asarray(out[0]).reshape(-1, nb, mech.m)
-    qb = np.take(np.asarray(back[0]), undo, axis=axis).reshape(qf.shape)
-    qm = merged[0].reshape(qf.shape)
-    filled = take.reshape(-1, nb)
-    for d_ in range(qf.shape[0]):
-        runs = np.flatnonzero(filled[d_] & ~np.concatenate([[False], filled[d_, :-1]]))
-        for r0 in runs:
-            r1 = r0 + np.argmin(filled[d_, r0:]) if not filled[d_, -1] else nb
-            if r1 < n and conv[d_, r1] and status_b[d_, r1] == Status.CONVERGED:
-                qm[d_, r0:r1] += 2 * np.pi * np.round((qf[d_, r1] - qb[d_, r1]) / (2 * np.pi))
-    merged[0] = qm.reshape(merged[0].shape)
-    return tuple(None if x is None else jax.device_put(x) for x in merged)
+    setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
+    d, nb = guess.shape[0], us.shape[-2]
+    k = block_size(nb, options.anchors)
+    nblk = -(-(nb - 1) // k) if nb > 1 else 0
+    valid = inputs_finite(us, p, guess)  # (D, nb)
+    xs, us_r = walk_inputs(setup, us_s, valid, n, k, nblk)
+    u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
+    m, dof = mech.m, us.shape[-1]
+    walk = WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), g0)
+    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first, walk)
+    u_first_r = jnp.broadcast_to(us_r[..., 0, :], (d, dof))
+    step = functools.partial(stroke_step, setup, g0, u_first_r, empty_points(setup, g0, u_first, k))
+    last, out = jax.lax.scan(step, init, xs)
+    fwd = jax.tree_util.tree_map(lambda x: unblock(x[: nblk + 1], d, k, nb), out)
+    back = jax.tree_util.tree_map(lambda x: unblock(x[nblk + 1 :], d, k, nb), out)
+    pts = merge_reverse(mech, fwd, back, last.walk.need, n, valid)
+    res = attach(mech, setup, pts, valid, us_s, p)
+    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
 def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False):
@@ -446,9 +274,8 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     nb = bucket(n)
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
-    out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf)
-    if not traced:
-        out = _backward(mech, options, bool(derivs), single, us_, pf, gf, out, n)
+    # n traced: one program serves every length of a bucket
+    out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf, np.int32(n))
     if nb > n:
         axis = 0 if single else 1
         if traced:
@@ -456,9 +283,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
         else:
             # jax.device_put, not jnp.asarray: the latter compiles a small staging program per shape
             out = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x).take(np.arange(n), axis=axis)), out)
-    q, status, steps, rn, cond, br, flipped, d1, d2 = out
-    sol = Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=br, flipped=flipped, coords=mech.coords, branches=branch_names(mech))
-    return sol, d1, d2
+    return out
 
 
 def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), throw: bool = False) -> Solution:
@@ -472,11 +297,15 @@ def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptio
       continuation then keeps (``BRANCH`` status where only the other branch closes).
     - `options`: ``SolverOptions`` (``options.anchors``: how many points are solved in
       sequence; more anchors are safer near toggles and slower).
-    - `throw`: raise ``RuntimeError`` if any sample did not converge.
+    - `throw`: raise ``RuntimeError`` if any sample did not converge.  Needs concrete
+      arguments: with traced ones (inside ``jax.jit``, ``vmap``, ``grad``) ``throw=True``
+      raises ``ValueError`` at once; check ``sol.status`` instead.
 
     **Returns** a ``Solution`` with shape ``(N, ...)`` for one design, ``(D, N, ...)`` for D;
     differentiable in ``us`` and ``p`` by the implicit function theorem.
     """
+    if throw:
+        require_concrete((us, p, guess))
     sol, _, _ = stroke(mech, us, p, guess, options, derivs=False)
     if throw:
         raise_if_failed(sol)

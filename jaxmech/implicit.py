@@ -1,9 +1,19 @@
 """Implicit derivatives of a converged root: the implicit function theorem as one custom JVP.
 
-Derivatives never go through the Newton iterations.  ``implicit_solution`` attaches any
-converged root to its arguments; the position solve (``implicit_root``: ``q*`` attached to
-``(u, p)``), statics (the equilibrium inputs) and forward dynamics (the Runge-Kutta stages)
-all use it with their own residual.  For the positions, differentiating
+Derivatives never go through the Newton iterations.  One name per idea:
+
+- ``implicit_solution(residual, x*, ok, args)``: any converged root attached to its
+  arguments (the one implicit-function rule); statics (the equilibrium inputs) and forward
+  dynamics (the Runge-Kutta stages) use it with their own residual;
+- ``implicit_positions(mech, q*, ok, u, p)``: it for a mechanism's loop closure (the
+  positions ``q*`` attached to ``(u, p)``);
+- ``input_derivatives(mech, q, u, p, ok)``: ``dq/du`` and ``d2q/du2`` at a root (values;
+  ``kinematics.input_derivatives`` is its public face, with shape checks);
+- ``implicit_input_derivatives(mech, d1, d2, q*, ok, u, p)``: such values, computed without
+  gradients, attached to ``(u, p)`` (a stroke computes them inside its walk).
+
+The former names ``implicit_root``, ``root_derivatives`` and ``attach_derivatives`` still
+work, with a ``DeprecationWarning``.  For the positions, differentiating
 ``Phi(q*(u, p), u, p) = 0`` gives
 
     Phi_q dq + Phi_u du + Phi_p dp = 0   =>   dq = -Phi_q^{-1} (Phi_u du + Phi_p dp).
@@ -16,6 +26,7 @@ order follow.
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Callable
 
 import jax
@@ -25,7 +36,18 @@ from .linalg import solve_blocks, solve_small, where
 from .mechanism import Mechanism
 from .structure import blocks
 
-__all__ = ["implicit_solution", "mechanism_residual", "implicit_root", "root_derivatives", "attach_derivatives"]
+__all__ = ["implicit_solution", "mechanism_residual", "implicit_positions", "input_derivatives", "implicit_input_derivatives"]
+
+#: Deprecated names -> the names that replaced them (module ``__getattr__`` below).
+DEPRECATED = {"implicit_root": "implicit_positions", "root_derivatives": "input_derivatives", "attach_derivatives": "implicit_input_derivatives"}
+
+
+def __getattr__(name):
+    if name in DEPRECATED:
+        new = DEPRECATED[name]
+        warnings.warn(f"jaxmech.implicit.{name} is deprecated: use jaxmech.implicit.{new}", DeprecationWarning, stacklevel=2)
+        return globals()[new]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _safe(ok, tree, fill):
@@ -107,13 +129,13 @@ def _implicit_solution_jvp(residual, structure, primals, tangents):
 
 
 def mechanism_residual(mech: Mechanism, q, args):
-    """``Phi(q, u, p)`` of ``mech`` with ``args = (u, p)``: the residual ``implicit_root``
+    """``Phi(q, u, p)`` of ``mech`` with ``args = (u, p)``: the residual ``implicit_positions``
     attaches."""
     u, p = args
     return mech.residual(q, u, p)
 
 
-def implicit_root(mech: Mechanism, q_star, ok, u, p):
+def implicit_positions(mech: Mechanism, q_star, ok, u, p):
     """Attach a converged root ``q*`` to ``(u, p)`` for differentiation (identity on values):
     ``implicit_solution`` of the loop-closure residual, solved block by block.
 
@@ -123,8 +145,9 @@ def implicit_root(mech: Mechanism, q_star, ok, u, p):
     return implicit_solution(functools.partial(mechanism_residual, mech), q_star, ok, (u, p), blocks(mech))
 
 
-def root_derivatives(mech: Mechanism, q, u, p, ok):
-    """``dq/du (m, dof)`` and ``d2q/du2 (m, dof, dof)`` at a root ``q`` (finite) of one sample.
+def input_derivatives(mech: Mechanism, q, u, p, ok=None):
+    """``dq/du (m, dof)`` and ``d2q/du2 (m, dof, dof)`` at a root ``q`` of one sample (rad or
+    m per unit input).
 
     Differentiating ``Phi(q(u), u) = 0`` once and twice along the inputs:
 
@@ -133,9 +156,14 @@ def root_derivatives(mech: Mechanism, q, u, p, ok):
     so one Jacobian, one factorisation and one second directional derivative per input
     pair serve both orders.  The second derivative is taken with the primal point ``(q, u)``
     itself (not ``q + 0 x``), so under jit it shares its sines and cosines with the
-    solver's last Jacobian.  Where ``ok`` is False the Jacobian is replaced by the identity
-    and the results are zero: finite in both directions of differentiation.
+    solver's last Jacobian.  Where ``ok`` is False (by default: where ``q`` is not finite)
+    the Jacobian is replaced by the identity and the results are zero: finite in both
+    directions of differentiation.  ``q`` attached to ``(u, p)`` (``implicit_positions``)
+    makes the results differentiable again.
     """
+    if ok is None:
+        ok = jnp.all(jnp.isfinite(q))
+        q = where(ok, q, jnp.zeros_like(q))
     m, dof = mech.m, mech.dof
     jq = jax.jacfwd(mech.residual, 0)(q, u, p)
     jq = where(ok, jq, jnp.eye(m, dtype=jq.dtype))
@@ -155,22 +183,22 @@ def root_derivatives(mech: Mechanism, q, u, p, ok):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def attach_derivatives(mech: Mechanism, d1, d2, q_star, ok, u, p):
+def implicit_input_derivatives(mech: Mechanism, d1, d2, q_star, ok, u, p):
     """``(d1, d2)`` (``dq/du`` and ``d2q/du2`` computed without gradients at the root
-    ``q_star``), made differentiable in ``u`` and ``p`` like ``root_derivatives`` of the
-    attached root: its tangent is ``root_derivatives``'s, taken through ``implicit_root``.
+    ``q_star``), made differentiable in ``u`` and ``p`` like ``input_derivatives`` of the
+    attached root: its tangent is ``input_derivatives``'s, taken through ``implicit_positions``.
     Values pass unchanged; nothing is traced for the tangent unless one is asked for."""
     return d1, d2
 
 
-@attach_derivatives.defjvp
-def _attach_derivatives_jvp(mech, primals, tangents):
+@implicit_input_derivatives.defjvp
+def _implicit_input_derivatives_jvp(mech, primals, tangents):
     _, _, q_star, ok, u, p = primals
     _, _, _, _, du, dp = tangents
     q_s = where(ok, q_star, jnp.zeros_like(q_star))
 
     def fn(u_, p_):
-        e1, e2 = root_derivatives(mech, implicit_root(mech, q_s, ok, u_, p_), u_, p_, ok)
+        e1, e2 = input_derivatives(mech, implicit_positions(mech, q_s, ok, u_, p_), u_, p_, ok)
         return where(ok, e1, jnp.nan), where(ok, e2, jnp.nan)
 
     (e1, e2), (t1, t2) = jax.jvp(fn, (u, p), (du, dp))

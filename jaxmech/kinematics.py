@@ -6,7 +6,7 @@ derivatives are nested forward-mode derivatives of ``t -> q*(u(t), p)``:
     q_dot  = q' u_dot,      q_ddot = q' u_ddot + q''[u_dot, u_dot],
 
 with ``q' = dq/du`` and ``q'' = d2q/du2`` given by the implicit function theorem
-(``implicit.implicit_root``).  Nothing is differentiated through Newton iterations.
+(``implicit.input_derivatives``).  Nothing is differentiated through Newton iterations.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from .mechanism import Mechanism
 from .continuation import stroke
 from .inputs import as_coords, as_inputs
-from .implicit import implicit_root, root_derivatives
+from . import implicit
 from .options import SolverOptions
 from .xla import jit
 
@@ -194,7 +194,7 @@ def input_derivatives(mech: Mechanism, q, u, p):
     """
     q, u = one_state(mech, q, u)
     ok = jnp.all(jnp.isfinite(q))
-    return root_derivatives(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
+    return implicit.input_derivatives(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
 
 
 def time_derivatives(fn: Callable, t):

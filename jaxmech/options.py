@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
+import warnings
 
 import jax.numpy as jnp
 
@@ -13,7 +15,9 @@ __all__ = ["SolverOptions", "tolerances"]
 class SolverOptions:
     """Static solver settings (hashable; part of the compiled function's identity).
 
-    - `max_steps`: Newton/Levenberg-Marquardt iteration budget per sample.
+    - `max_iterations`: Newton/Levenberg-Marquardt iteration budget per sample (formerly
+      ``max_steps``, a name one letter from ``max_step``: still accepted, with a
+      ``DeprecationWarning``).
     - `xtol`: converged when the next scaled Newton step is below this (rad, or
       multiples of the design's length scale).  Default ``eps**(2/3)`` of the dtype.
     - `ftol`: converged residual, relative to the design's length scale.  Default
@@ -34,7 +38,7 @@ class SolverOptions:
       argument is float32); ``None`` follows the arguments.
     """
 
-    max_steps: int = 80
+    max_iterations: int = 80
     xtol: float | None = None
     ftol: float | None = None
     cond_max: float | None = None
@@ -42,6 +46,30 @@ class SolverOptions:
     patience: int = 8
     anchors: int = 512
     dtype: str | None = None
+
+
+def _deprecated_init(init):
+    """``SolverOptions``'s constructor, also taking ``max_steps`` (the deprecated name of
+    ``max_iterations``, one letter from ``max_step``) with a ``DeprecationWarning``."""
+
+    @functools.wraps(init)
+    def wrapped(self, *args, max_steps=None, **kwargs):
+        if max_steps is not None:
+            warnings.warn("SolverOptions(max_steps=...) is deprecated: use max_iterations=... (max_step is the step cap)",
+                          DeprecationWarning, stacklevel=2)
+            kwargs.setdefault("max_iterations", int(max_steps))
+        init(self, *args, **kwargs)
+
+    return wrapped
+
+
+def _max_steps(self) -> int:
+    warnings.warn("SolverOptions.max_steps is deprecated: use max_iterations", DeprecationWarning, stacklevel=2)
+    return self.max_iterations
+
+
+SolverOptions.__init__ = _deprecated_init(SolverOptions.__init__)
+SolverOptions.max_steps = property(_max_steps)
 
 
 

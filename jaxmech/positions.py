@@ -1,7 +1,7 @@
 """Position solves of batches of samples: ``solve`` (jit-compiled, vmapped) and ``solve_one``.
 
 Every sample is one damped Newton solve (``newton.newton``) from its guess, with its root
-attached to ``(u, p)`` by the implicit function theorem (``implicit.implicit_root``).
+attached to ``(u, p)`` by the implicit function theorem (``implicit.implicit_positions``).
 Strokes, solved by continuation, are in ``continuation``.
 """
 
@@ -16,12 +16,12 @@ import numpy as np
 
 from .branches import branch_names
 from .linalg import where
-from .implicit import implicit_root
+from .implicit import implicit_positions
 from .inputs import batch_shape, prepare
 from .mechanism import Mechanism
 from .newton import newton
 from .options import SolverOptions
-from .solution import Solution, raise_if_failed
+from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
 from .xla import jit
 
@@ -35,11 +35,11 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
     Returns a ``Solution`` with scalar status.  No checks: use ``solve`` from user code.
     """
     stop = jax.lax.stop_gradient
-    q_raw, status, steps, rn, cond, branch, flipped = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
-    ok = status == Status.CONVERGED
-    q_star = where(ok, q_raw, jnp.nan)
-    q = implicit_root(mech, q_star, ok, u, p)
-    return Solution(q=q, status=status, steps=steps, residual=rn, cond=cond, branch=branch, flipped=flipped, coords=mech.coords, branches=branch_names(mech))
+    res = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
+    ok = res.status == Status.CONVERGED
+    q = implicit_positions(mech, where(ok, res.q, jnp.nan), ok, u, p)
+    return Solution(q=q, status=res.status, steps=res.steps, residual=res.residual, cond=res.cond, branch=res.branch,
+                    flipped=res.flipped, coords=mech.coords, branches=branch_names(mech))
 
 
 @functools.partial(jit, static_argnums=(0, 1))
@@ -58,13 +58,18 @@ def solve(mech: Mechanism, u, p: Mapping, guess, *, options: SolverOptions = Sol
     - `guess`: ``(..., m)`` or ``{coord_name: array}``; picks the assembly branch.
     - `options`: ``SolverOptions``.
     - `throw`: raise ``RuntimeError`` if any sample did not converge (one bad sample raises
-      for the whole batch).
+      for the whole batch).  Needs concrete arguments: inside ``jax.jit``, ``vmap`` or
+      ``grad`` no value is known when the program is built, so ``throw=True`` there raises
+      ``ValueError`` at once; check ``sol.status`` instead.
 
     **Returns** a ``Solution`` whose fields have the broadcast batch shape in front;
     differentiable in ``u`` and ``p`` by the implicit function theorem.
 
-    **Raises** ``ValueError`` for unknown names, bad values, shapes or dtypes (before tracing).
+    **Raises** ``ValueError`` for unknown names, bad values, shapes or dtypes (before tracing),
+    and for ``throw=True`` with traced arguments.
     """
+    if throw:
+        require_concrete((u, p, guess))
     u, p, guess = prepare(mech, u, p, guess, options)
     shape = batch_shape(mech, {"u": u.shape[:-1], "guess": guess.shape[:-1], **{f"p[{k!r}]": v.shape for k, v in p.items()}})
     n = int(np.prod(shape, dtype=np.int64))

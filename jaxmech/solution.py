@@ -9,7 +9,7 @@ import numpy as np
 
 from .status import Status, status_counts, status_message
 
-__all__ = ["Solution", "raise_if_failed"]
+__all__ = ["Solution", "raise_if_failed", "require_concrete"]
 
 
 @jax.tree_util.register_dataclass
@@ -72,7 +72,18 @@ class Solution:
         return text
 
 
+def require_concrete(args) -> None:
+    """``ValueError`` if any leaf of ``args`` is traced: ``throw=True`` decides on values, and
+    inside ``jax.jit``, ``vmap`` or ``grad`` none is known when the program is built (raising
+    from the running program, by a callback, would surface as an opaque runtime error)."""
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
+        raise ValueError("throw=True needs concrete inputs: inside jax.jit, vmap or grad no value is known when the "
+                         "program is built; call with throw=False and check sol.status (jaxmech.status_counts) instead")
+
+
 def raise_if_failed(sol: Solution):
+    """``RuntimeError`` naming the failed samples' statuses and the first one's message, if
+    any sample of ``sol`` is not ``CONVERGED`` (one failure raises for the batch)."""
     status = np.asarray(sol.status)
     if np.any(status != Status.CONVERGED):
         bad = {k: v for k, v in status_counts(status).items() if k != "CONVERGED"}

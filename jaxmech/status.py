@@ -34,7 +34,7 @@ class Status(enum.IntEnum):
 
 _MESSAGES = {
     Status.CONVERGED: "converged",
-    Status.MAX_STEPS: "not converged within the iteration budget; raise max_steps or give a closer guess",
+    Status.MAX_STEPS: "not converged within the iteration budget; raise SolverOptions.max_iterations or give a closer guess",
     Status.SINGULAR: "singular Jacobian (toggle / dead-centre position): positions exist but derivatives are unbounded",
     Status.INFEASIBLE: "cannot be assembled here: the loop-closure residual stalls above tolerance",
     Status.NONFINITE: "non-finite input, parameter, guess or residual",

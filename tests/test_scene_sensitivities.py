@@ -4,7 +4,7 @@ For each scene of ``jaxmech.scenes.scene_names()`` one scalar figure of merit is
 ``design.scene_figure`` (the scene run over its stroke exactly as ``run_scene`` does, at
 ``POINTS`` samples, outputs included) and differentiated with ``jax.value_and_grad``
 with respect to **every** parameter of the scene, geometric and physical.  The position
-derivatives come from the implicit function theorem in ``jaxmech.solve`` (``implicit_root``),
+derivatives come from the implicit function theorem in ``jaxmech.solve`` (``implicit_positions``),
 never from the Newton iterations.  Every scene's figure is traceable through
 ``scene_figure`` (the scenes' eager ``validate`` is not called there), so no scene needs a
 hand-made path.

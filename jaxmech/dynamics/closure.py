@@ -8,7 +8,7 @@ import jax.numpy as jnp
 
 from ..linalg import cond1, small_norm, solve_small
 from ..mechanism import Mechanism
-from ..implicit import implicit_root
+from ..implicit import implicit_positions
 from ..newton import evaluator
 from ..branches import branch_value, has_branch, on_branch
 from ..options import SolverOptions, tolerances
@@ -42,5 +42,5 @@ def close_loop(mech: Mechanism, u, p, qg, iters: int, options: SolverOptions = S
     if has_branch(mech):
         ok = ok & on_branch(jnp.sign(branch_value(mech, stop(qg), us, ps)), branch_value(mech, q, us, ps))
     q_star = jnp.where(ok, q, jnp.nan)
-    return implicit_root(mech, q_star, ok, u, p), ok
+    return implicit_positions(mech, q_star, ok, u, p), ok
 

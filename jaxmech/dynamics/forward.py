@@ -20,7 +20,7 @@ import numpy as np
 
 from ..linalg import solve_small
 from ..actuators import DCMotor, parameter_names
-from ..implicit import implicit_root, implicit_solution
+from ..implicit import implicit_positions, implicit_solution
 from ..mechanism import Vars
 from ..inputs import as_coords, as_inputs
 from ..options import SolverOptions
@@ -140,7 +140,7 @@ def rhs(integ: Integrator, p, t, y, qg):
     if load is not None:
         # The convention of every load: fn(q, u, p, v, t) with names (Moment, PointForce),
         # v the coordinates' and inputs' rates (q_dot = dq/du u_dot, implicit).
-        _, qd = jax.jvp(lambda u_: implicit_root(mech, jax.lax.stop_gradient(q), ok, u_, p), (u,), (ud,))
+        _, qd = jax.jvp(lambda u_: implicit_positions(mech, jax.lax.stop_gradient(q), ok, u_, p), (u,), (ud,))
         v = Vars({**{n: qd[i] for i, n in enumerate(mech.coords)}, **{n: ud[i] for i, n in enumerate(mech.inputs)}})
         tau = tau + jnp.reshape(load(mech.vars_q(q), mech.vars_u(u), Vars(p), v, t), (dof,))
     # Each actuator: its force on its input, and the rates of its own states (StatefulActuator).
@@ -393,7 +393,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     and ``h`` the inverse-dynamics force at zero input acceleration (for one input
     ``h = (1/2) M'(u) u_dot^2 - Q``); with an inductive motor the state also holds the
     current, ``L di/dt = v - R i - n K w``.  Every stage closes the loop (a fixed number of
-    Newton steps from the step's start, attached to ``(u, p)`` by ``implicit.implicit_root``),
+    Newton steps from the step's start, attached to ``(u, p)`` by ``implicit.implicit_positions``),
     and the stage equations ``Z = h A F(y + Z)`` are solved by simplified Newton (one
     iteration matrix per step, from a finite-difference Jacobian) and attached to their
     arguments by a custom JVP (the implicit function theorem on the stage equations:

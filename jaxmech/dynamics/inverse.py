@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..continuation import stroke
-from ..implicit import root_derivatives
+from ..implicit import input_derivatives
 from ..inputs import as_coords, as_inputs, batch_shape
 from ..kinematics import chain_rule, drive_rates, drive_samples, join_drive, point_kinematics, split_drive
 from ..options import SolverOptions
@@ -110,7 +110,7 @@ def _at_one(model, quasi_static, names, options, u, ud, udd, p, t, guess):
     mech = model.mechanism
     sol = solve_one(mech, u, mechanism_params(model, p), guess, options)
     ok = sol.status == Status.CONVERGED
-    d1, d2 = root_derivatives(mech, jnp.where(ok, sol.q, 0.0), u, mechanism_params(model, p), ok)
+    d1, d2 = input_derivatives(mech, jnp.where(ok, sol.q, 0.0), u, mechanism_params(model, p), ok)
     return dict(_sample(model, quasi_static, names, p, t, u, ud, udd, sol.q, d1, d2), q=sol.q, status=sol.status)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..linalg import solve_small
 from ..actuators import Spec, resolve, spec_names
-from ..implicit import implicit_root, implicit_solution
+from ..implicit import implicit_positions, implicit_solution
 from ..inputs import as_coords, as_inputs
 from ..options import SolverOptions
 from ..positions import solve_one
@@ -66,7 +66,7 @@ def static_residual(model: Model, applied, u, args):
     positions ignores the tangent of ``q_star``), whether they converged, the parameters
     and the time (s)."""
     q_star, ok, p, t = args
-    q = implicit_root(model.mechanism, q_star, ok, u, p)
+    q = implicit_positions(model.mechanism, q_star, ok, u, p)
     tau, _ = generalized_forces(model, q, u, jnp.zeros_like(u), jnp.zeros_like(u), p, t, inertia=False)
     return tau - jnp.broadcast_to(jnp.asarray(resolve(applied, p), tau.dtype), tau.shape)
 

@@ -13,7 +13,7 @@ scalar virtual-work function ``W(x) = sum m a_G . r_G(x) + J alpha phi(x) - F . 
 M phi(x) + V(x) + T L(x)`` with the accelerations and loads frozen at the actual state.
 The ``q`` rows give ``lambda = -Phi_q^{-T} (I - Q)_q``, the ``u`` rows
 ``tau = (I - Q)_u + Phi_u^T lambda``.  Accelerations come from the implicit kinematics
-(nested ``jax.jvp`` through ``solve.implicit_root``), never from Newton iterates.
+(nested ``jax.jvp`` through ``implicit.implicit_positions``), never from Newton iterates.
 
 **Reactions.**  ``-Phi_x^T lambda`` is the generalized constraint force.  For a complex loop
 written ``path_1 - path_2 = 0`` (the two ways to reach the closing joint), the pair
@@ -34,7 +34,7 @@ from ..linalg import solve_small
 from ..actuators import resolve
 from ..kinematics import one_state, time_derivatives
 from ..mechanism import Vars
-from ..implicit import implicit_root
+from ..implicit import implicit_positions
 from .model import Axial, Gravity, Model, Moment, PointForce, Potential, geometry, masses
 
 __all__ = ["generalized_forces", "LoadedState", "loaded_state", "balance", "mass_matrix", "kinetic_energy", "potential_energy"]
@@ -71,7 +71,7 @@ def _path(model: Model, q, ok, u, ud, udd, p, qd=None, qdd=None):
 
     def path(s):
         us = u + ud * s + 0.5 * udd * s * s
-        return implicit_root(mech, q, ok, us, p), us
+        return implicit_positions(mech, q, ok, us, p), us
 
     return path
 
@@ -221,7 +221,7 @@ def mass_matrix(model: Model, q, u, p):
     ok, q = _safe(model, q, u, p)
 
     def poses(u_):
-        qs = implicit_root(mech, q, ok, u_, p)
+        qs = implicit_positions(mech, q, ok, u_, p)
         rg, ph, *_ = geometry(model, qs, u_, p)
         return jnp.stack(rg) if rg else jnp.zeros((0,), complex), jnp.stack(ph) if ph else jnp.zeros((0,))
 

@@ -1,0 +1,204 @@
+"""One stroke point: the guarded predictor, the checked Newton step, and fresh assembly.
+
+These act on one sample (one design, one input); ``stroke_stages`` maps them over a block
+of points and designs, and ``continuation`` walks the blocks.  ``predict`` gives a point's
+guess from the last anchor's root and implicit derivatives; ``checked_step`` takes one
+plain Newton step from it and runs the kernel's tests; a point that fails them is solved
+by ``assemble``: the Newton kernel (``newton.newton``) from several starts.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .branches import branch_value, has_branch, on_branch
+from .linalg import cond1, small_max, small_norm, solve_blocks, where
+from .mechanism import Mechanism
+from .newton import NewtonResult, coord_scales, evaluator, newton, per_lane
+from .options import SolverOptions, tolerances
+from .status import Status
+from .structure import blocks
+from .xla import unfused
+
+__all__ = ["predict", "checked_step", "CheckedStep", "assemble", "STARTS"]
+
+
+# --------------------------------------------------------------------------- predictor
+def series_terms(d1, d2, du):
+    """``(q' du, q'' du du / 2)`` as elementwise products and sums over the (few) inputs: a
+    ``dot`` under ``vmap`` is lowered by XLA according to the batch size, with a rounding
+    that depends on it, and a stroke's result must not depend on its batch."""
+    first = jnp.sum(d1 * du, axis=-1)
+    second = 0.5 * jnp.sum(d2 * du[:, None] * du[None, :], axis=(-2, -1))
+    return first, second
+
+
+def trusted_terms(d1, d2, du, s, max_step):
+    """``(d1, d2)`` with the terms the Taylor series cannot be trusted with over ``du`` zeroed.
+
+    Near a singular position the series diverges (there ``q''`` is huge: a flap design
+    that starts near a toggle had its second-order term predict 2000 rad, and Newton then
+    converged to the same pose 319 turns away, where angle-dependent loads are wrong).  So
+    the second-order term is kept only while it is under a quarter of the first-order one
+    (scaled max norms: the series is then converging), and a step of more than ``max_step``
+    (scaled, as Newton's) is not predicted at all: the anchor itself is the guess.
+    """
+    first, second = series_terms(d1, d2, du)
+    size = lambda x: small_max(jnp.abs(x) / s)  # noqa: E731
+    keep2 = size(second) <= 0.25 * size(first)
+    step = where(keep2, first + second, first)
+    keep1 = size(step) <= max_step
+    return where(keep1, d1, 0.0), where(keep1 & keep2, d2, 0.0)
+
+
+def predict(q, d1, d2, du, s, max_step):
+    """Guarded second-order predictor ``q + q' du + q'' du du / 2`` from a solved anchor
+    (``q (m,)``, ``d1 (m, dof)``, ``d2 (m, dof, dof)``), with the terms its series cannot be
+    trusted with dropped (``trusted_terms``).  ``s``: coordinate scales
+    (``newton.coord_scales``); ``max_step``: the largest scaled step predicted.
+
+    ``du``: one input step ``(dof,)`` -> ``(m,)``, or the steps to a block of points
+    ``(k, dof)`` -> ``(k, m)``: the series is then judged once, over the last (farthest)
+    step, and the same terms serve every point (what a stroke's block does).
+    """
+    one = du.ndim == 1
+    du = du.reshape((-1, du.shape[-1]))
+    d1_t, d2_t = trusted_terms(d1, d2, du[-1], s, max_step)
+
+    def point(du_):
+        first, second = series_terms(d1_t, d2_t, du_)
+        return q + first + second
+
+    out = jax.vmap(point)(du)
+    return out[0] if one else out
+
+
+# --------------------------------------------------------------------------- one checked step
+class CheckedStep(NamedTuple):
+    """``checked_step``'s result for one sample.
+
+    - `q_eval`: the iterate the tests (and the derivatives) are evaluated at, always finite.
+    - `q`: ``q_eval`` plus the next Newton step where ``ok`` (the reported root).
+    - `ok`: every test passed (converged, conditioned, finite, on the branch).
+    - `residual`, `cond`, `branch`: at ``q_eval``, as ``newton.NewtonResult``'s.
+    """
+
+    q_eval: jax.Array
+    q: jax.Array
+    ok: jax.Array
+    residual: jax.Array
+    cond: jax.Array
+    branch: jax.Array
+
+
+def lean_xtol(opts: SolverOptions, dtype):
+    """Step test of ``checked_step``.  Derivatives are taken at its iterate, one Newton step
+    ``dz`` from the reported root, and they move by ``|dz|`` times the curvature;
+    ``dz <= 1e4 eps`` keeps that below 1e-9 relative up to a condition number of ~1e3
+    (beyond which the robust kernel re-solves the point anyway)."""
+    return min(tolerances(opts, dtype)[0], 1e4 * float(jnp.finfo(dtype).eps))
+
+
+def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0) -> CheckedStep:
+    """One plain Newton step from a close (predicted) guess, then the convergence,
+    conditioning, finiteness and branch (``b0``: the requested signs) tests of
+    ``newton.newton``: straight-line code for the common case of a stroke point; the
+    points that fail it go to ``assemble``."""
+    dtype = guess.dtype
+    _, ftol, cond_max = tolerances(opts, dtype)
+    evaluate, s = evaluator(mech, u, p, dtype)
+    r, js = evaluate(guess)
+    order = blocks(mech)  # block-triangular solves (structure.py)
+    q = guess - solve_blocks(js, r, order) * s
+    finite_q = jnp.all(jnp.isfinite(q))
+    q = where(finite_q, q, jnp.zeros_like(q))
+    r, js = evaluate(q)
+    dz = solve_blocks(js, r, order)
+    rn = small_norm(r)
+    cond = cond1(js, order)
+    br = branch_value(mech, q, u, p, js)
+    ok = (small_max(jnp.abs(dz)) <= lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
+    ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch(b0, br)
+    qf = where(ok, q - dz * s, q)
+    # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
+    packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
+    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br)
+
+
+# --------------------------------------------------------------------------- fresh assembly
+#: Starts of ``assemble`` besides the guess: fixed offsets from the reference pose, in
+#: half-turns for angles and length scales for lengths (deterministic, so a stroke's result
+#: does not depend on anything but its inputs).  14: with 6, 1 in ~20 random six-bars
+#: crossing gaps left a stretch after a gap on the other branch of a loop; with 14, none of
+#: 210 did (tried one after another only while a point is unresolved: the count costs
+#: run time only where the guess fails, and no compile time).
+STARTS = 14
+
+
+def start_offsets(m: int) -> np.ndarray:
+    """``(STARTS, m)`` fixed offsets in [-1, 1] (a seeded generator: deterministic)."""
+    return np.random.default_rng(20261124).uniform(-1.0, 1.0, (STARTS, m))
+
+
+def score(status):
+    """How good an answer is: 2 a root on the branch, 1 one only on another, 0 none."""
+    return where(status == Status.CONVERGED, 2, where(status == Status.BRANCH, 1, 0))
+
+
+def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False) -> NewtonResult:
+    """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
+    from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
+
+    ``newton.newton`` runs from one start after another until a root on the branch is
+    found: the guess (the anchor itself where the predicted guess is off the branch), the
+    guess again with a tenth of the step cap (which keeps Newton on the near side of a fold,
+    a toggle the stroke re-enters at, where full steps overshoot), then ``STARTS`` fixed
+    offsets around ``ref``: the fresh assembly a stroke needs after a gap, where no pose
+    near the last trusted one exists to continue from.  One call site of the kernel, in a
+    ``while_loop``: under ``vmap`` a block whose points all close from their guesses costs
+    one Newton solve, as without restarts, and finished lanes skip the later starts.  The
+    best answer is kept: a root on the branch, else one that exists only on another branch
+    (``BRANCH`` says more than a stall), else the guess's own status; the earliest start
+    wins a tie.  Angles are then moved by whole turns to lie within half a turn of the
+    guess (where the equations allow it: checked on the residual), so a stroke's angles are
+    continuous as numbers.
+
+    ``inputs_finite``: as for ``newton`` (the stroke program sanitises its inputs once).
+    Returns the best start's ``newton.NewtonResult`` (``q`` moved by the whole turns).
+    """
+    dtype = guess.dtype
+    s = coord_scales(mech, p, dtype)
+    angle = ~jnp.asarray(mech.coord_is_length())
+    g0 = where(on_branch(target, branch_value(mech, guess, u, p)), guess, ref) if has_branch(mech) else guess
+    table = ref[None] + jnp.asarray(start_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
+    last = STARTS + 2
+
+    def wanted(carry):
+        j, best, best_score = carry
+        return (j < last) & (best_score < 2)
+
+    def attempt(carry):
+        j, best, best_score = carry
+        g = where(j < 2, g0, table[jnp.clip(j - 2, 0, STARTS - 1)])
+        cap = where(j == 1, 0.1 * opts.max_step, opts.max_step).astype(dtype)
+        res = newton(mech, opts, u, p, g, target, cap, skip=~wanted(carry), inputs_finite=inputs_finite)
+        take = wanted(carry) & (score(res.status) > best_score)
+        pick = lambda a, b: where(take, a, b)  # noqa: E731
+        return j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score)
+
+    zero = jnp.zeros((), dtype)
+    none = NewtonResult(guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
+                        branch_value(mech, guess, u, p), jnp.zeros((), jnp.int32))
+    init = per_lane((jnp.zeros((), jnp.int32), none, jnp.asarray(-1)), jnp.all(jnp.isfinite(guess)))
+    _, best, _ = jax.lax.while_loop(wanted, attempt, init)
+    # Whole turns towards the guess, kept only if the equations do not notice them.
+    turns = where(angle, jnp.round((best.q - guess) / (2 * jnp.pi)), 0.0)
+    q_w = best.q - 2 * jnp.pi * turns
+    _, ftol, _ = tolerances(opts, dtype)
+    r_w = mech.residual(q_w, u, p) / mech.residual_scales(p, dtype)
+    q = where((best.status == Status.CONVERGED) & (small_norm(r_w) <= jnp.maximum(ftol, 2 * best.residual)), q_w, best.q)
+    return best._replace(q=q)

@@ -1,0 +1,161 @@
+"""The stroke program as named stages: one program eager and under ``jax.jit``.
+
+``solve_stroke`` runs its forward walk and its reverse walk (the points after a gap that
+only the stretch after them reaches) in one compiled program, so a user's ``jax.jit``
+around it gives the same statuses and the same values to the last bit as the eager call,
+on strokes with gaps, including one where the forward walk alone cannot reach some points
+(shown here by running the forward walk's stage alone).  Truths: the closed-form poses of
+``tests/test_gaps.py`` (circle intersections, independent of the solver).  Also: the public
+predictor is the stroke's, ``throw=True`` under a trace, the deprecated names.
+"""
+
+import functools
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxmech as jm  # noqa: E402
+from jaxmech.scenes.classic import fourbar_mechanism  # noqa: E402
+from test_gaps import ACCURACY, N, SIXBAR, fourbar_truth, sixbar_truth  # noqa: E402
+
+S = jm.Status
+FIELDS = ("q", "status", "steps", "residual", "cond", "branch", "flipped")
+
+#: A Watt six-bar whose stroke leaves loop 2's range and re-enters it at a toggle: there the
+#: forward walk, coming from the gap, cannot reach the requested branch's poses (found by a
+#: search over random designs of tests/test_gaps.py's property).
+REENTRY_P = {"a": 2.076549321214803, "b": 2.7904069327870586, "c": 0.7222767335126113, "d": 1.8189962220125468,
+             "e": 2.3572252121870148, "f": 2.792045333646109, "g": 2.1036169549347865, "h": 4.409247357604528,
+             "k": -0.058859935065211255, "gamma": 0.14322006303468604}
+REENTRY_US = 5.12444595356452 + np.linspace(0.0, 4 * np.pi, N)
+REENTRY_SIGNS = (1.0, -1.0)
+
+#: Four-bars whose strokes cross gaps (Grashof-violating: the crank cannot turn fully).
+FOURBARS = [(dict(a=1.6, b=1.0, c=1.3, d=2.0), 0.3, 1.0), (dict(a=2.2, b=0.9, c=1.5, d=1.9), 1.1, -1.0)]
+
+
+def assert_bitwise_equal(a: jm.Solution, b: jm.Solution):
+    for f in FIELDS:
+        x, y = np.asarray(getattr(a, f)), np.asarray(getattr(b, f))
+        assert x.dtype == y.dtype and x.shape == y.shape, f
+        assert np.array_equal(x.view(np.uint8), y.view(np.uint8)), f"{f} differs eager vs jit"
+
+
+def eager_and_jit(mech, us, p, guess):
+    eager = jm.solve_stroke(mech, us, p, guess)
+    jitted = jax.jit(lambda u_, p_, g_: jm.solve_stroke(mech, u_, p_, g_))(us, p, guess)
+    return eager, jitted
+
+
+def forward_walk_only(mech, us, p, guess):
+    """The forward walk alone (``stroke_stages.walk_block`` over the stroke's blocks), the
+    statuses at the stroke's points: what ``solve_stroke`` gave before the reverse walk."""
+    from jaxmech.continuation import block_layout, block_size, stroke_setup, unblock
+    from jaxmech.stroke_stages import StrokeCarry, WalkState, walk_block
+
+    us = jnp.asarray(us)[:, None]
+    p = {k: jnp.full((1,), v) for k, v in p.items()}
+    setup, us_s, g0 = stroke_setup(mech, jm.SolverOptions(), False, us, p, jnp.asarray(guess)[None])
+    n, k = us.shape[0], block_size(us.shape[0], jm.SolverOptions().anchors)
+    nblk = -(-(n - 1) // k)
+    init = StrokeCarry(g0, jnp.zeros((1, mech.m, 1)), jnp.zeros((1, mech.m, 1, 1)), us_s[:1], WalkState(None, None, None))
+    _, out = jax.lax.scan(functools.partial(walk_block, setup), init, block_layout(us_s, k, nblk))
+    return np.asarray(unblock(out.status, 1, k, n))[0]
+
+
+def test_reverse_walk_is_part_of_the_program_and_reaches_what_the_forward_walk_cannot():
+    q_true, cond = sixbar_truth(REENTRY_US, REENTRY_P, REENTRY_SIGNS)
+    eager, jitted = eager_and_jit(SIXBAR, REENTRY_US, REENTRY_P, q_true[0])
+    assert_bitwise_equal(eager, jitted)
+    st = np.asarray(eager.status)
+    forward = forward_walk_only(SIXBAR, REENTRY_US, REENTRY_P, q_true[0])
+    reached = (st == S.CONVERGED) & (forward != S.CONVERGED)
+    assert np.any(reached), "the forward walk alone reaches every point: this stroke does not test the reverse walk"
+    # what the reverse walk reports is right, as a number and on the requested branch
+    exists = np.all(np.isfinite(q_true), axis=-1)
+    assert np.all(exists[reached])
+    q = np.asarray(eager.q)
+    np.testing.assert_allclose(q[reached], q_true[reached], atol=ACCURACY, rtol=0)
+    ok = st == S.CONVERGED
+    assert np.max(np.abs(np.diff(q[:, :4], axis=0))[ok[:-1] & ok[1:]], initial=0) < np.pi
+    assert not np.any(ok & ~exists)
+
+
+@pytest.mark.parametrize("p, t0, sign", FOURBARS)
+def test_strokes_with_gaps_are_bitwise_equal_eager_and_under_jit(p, t0, sign):
+    us = t0 + np.linspace(0.0, 4 * np.pi, N)
+    q_true, _ = fourbar_truth(us, p, sign)
+    exists = np.all(np.isfinite(q_true), axis=-1)
+    assert exists[0] and not np.all(exists)  # the stroke crosses a gap
+    eager, jitted = eager_and_jit(fourbar_mechanism, us, p, q_true[0])
+    assert_bitwise_equal(eager, jitted)
+    ok = np.asarray(eager.status) == S.CONVERGED
+    assert np.any(ok) and not np.any(ok & ~exists)
+
+
+def test_batch_of_designs_with_gaps_is_bitwise_equal_eager_and_under_jit():
+    ps = [p for p, _, _ in FOURBARS]
+    p = {k: np.array([q[k] for q in ps]) for k in "abcd"}
+    us = np.linspace(0.3, 0.3 + 4 * np.pi, 97)
+    guess = np.stack([fourbar_truth(us[:1], q, 1.0)[0][0] for q in ps])
+    eager, jitted = eager_and_jit(fourbar_mechanism, us, p, guess)
+    assert_bitwise_equal(eager, jitted)
+
+
+def test_stroke_predictor_is_the_public_predict():
+    """``predict`` over a block judges the series once, at the block's last step."""
+    from jaxmech.continuation import predict
+    from jaxmech.stroke_point import series_terms, trusted_terms
+
+    q, s = jnp.array([0.3, 1.0]), jnp.array([1.0, 1.0])
+    d1, d2 = jnp.array([[1.0], [-0.5]]), jnp.array([[[40.0]], [[20.0]]])
+    du = jnp.array([[0.001], [0.002], [0.05]])  # the last step's second-order term is too large
+    out = predict(q, d1, d2, du, s, 1.0)
+    d1_t, d2_t = trusted_terms(d1, d2, du[-1], s, 1.0)
+    assert float(jnp.max(jnp.abs(d2_t))) == 0.0  # dropped for the whole block
+    for i in range(3):
+        np.testing.assert_array_equal(np.asarray(out[i]), np.asarray(q + d1 @ du[i]))
+        first, second = series_terms(d1_t, d2_t, du[i])
+        np.testing.assert_array_equal(np.asarray(out[i]), np.asarray(q + first + second))
+
+
+def test_throw_under_jit_is_a_clear_error():
+    p = dict(a=1.0, b=3.0, c=2.5, d=3.5)
+    us = np.linspace(0.0, 1.0, 5)
+    for fn in (lambda u: jm.solve_stroke(fourbar_mechanism, u, p, jnp.array([0.4, 1.7]), throw=True),
+               lambda u: jm.solve(fourbar_mechanism, u, p, jnp.array([0.4, 1.7]), throw=True)):
+        with pytest.raises(ValueError, match="throw=True needs concrete inputs.*check sol.status"):
+            jax.jit(fn)(us)
+        assert np.all(np.asarray(fn(us).status) == S.CONVERGED)  # concrete: solves (and would raise)
+    with pytest.raises(RuntimeError, match="samples failed"):
+        jm.solve(fourbar_mechanism, np.array([0.0, 3.0]), dict(a=2.2, b=0.9, c=1.5, d=1.9), jnp.array([0.4, 1.7]), throw=True)
+
+
+def test_deprecated_names_warn_and_still_work():
+    from jaxmech import implicit
+
+    for old, new in implicit.DEPRECATED.items():
+        with pytest.warns(DeprecationWarning, match=new):
+            assert getattr(implicit, old) is getattr(implicit, new)
+    with pytest.warns(DeprecationWarning, match="implicit_positions"):
+        assert jm.implicit_root is jm.implicit_positions
+    with pytest.warns(DeprecationWarning, match="max_iterations"):
+        opts = jm.SolverOptions(max_steps=7)
+    assert opts == jm.SolverOptions(max_iterations=7)
+    with pytest.warns(DeprecationWarning, match="max_iterations"):
+        assert opts.max_steps == 7
+
+
+def test_newton_result_is_named():
+    from jaxmech.newton import NewtonResult, newton
+
+    res = newton(fourbar_mechanism, jm.SolverOptions(), jnp.array([0.5]), dict(a=1.0, b=3.0, c=2.5, d=3.5), jnp.array([0.4, 1.7]))
+    assert isinstance(res, NewtonResult) and int(res.status) == S.CONVERGED
+    a, b, c, d = 1.0, 3.0, 2.5, 3.5
+    joint = a * np.exp(0.5j) + b * np.exp(1j * float(res.q[0]))
+    assert abs(joint - (d + c * np.exp(1j * float(res.q[1])))) < 1e-13
