@@ -84,3 +84,10 @@ def test_scene_stroke_is_a_named_record():
     assert isinstance(part, StrokePart)
     assert part.solution.q.shape == (2, 5, 2) and part.dq_du.shape == (2, 5, 2, 1) and part.t.shape == (2, 5)
     np.testing.assert_allclose(part.t[:, -1], 2 * np.pi, rtol=1e-15)  # one crank turn at 1 rad/s
+
+
+def test_the_old_output_units_warns_and_reads_the_declaration():
+    from jaxmech.scenes.evaluation import output_units as old
+
+    with pytest.warns(DeprecationWarning, match="scenes.outputs.output_units"):
+        assert old(FOURBAR, 11, None, {}) == {"transmission_angle": "rad"}

@@ -16,6 +16,7 @@ rounds differently: sma_flap's accelerations moved by an ulp).
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -175,8 +176,10 @@ def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs:
 
 
 def output_units(scene, points: int | None = None, options: SolverOptions | None = None, p=None) -> dict:
-    """``{output name: unit}`` in the scene's order: ``outputs.output_units(scene)`` (the
-    scene's declaration; `points`, `options` and `p` are not needed and ignored)."""
+    """Deprecated: ``scenes.outputs.output_units(scene)`` (the scene's declaration; `points`,
+    `options` and `p` are not needed and ignored)."""
+    warnings.warn("jaxmech.scenes.evaluation.output_units is deprecated: use jaxmech.scenes.outputs.output_units(scene)",
+                  DeprecationWarning, stacklevel=2)
     return scene_output_units(scene)
 
 
