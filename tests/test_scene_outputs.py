@@ -91,3 +91,20 @@ def test_the_old_output_units_warns_and_reads_the_declaration():
 
     with pytest.warns(DeprecationWarning, match="scenes.outputs.output_units"):
         assert old(FOURBAR, 11, None, {}) == {"transmission_angle": "rad"}
+
+
+def test_design_does_not_import_the_sweeps():
+    """The evaluators design needs live with the scene evaluation (``scenes.columns``): no
+    module of ``jaxmech/design`` imports ``jaxmech.sweep``."""
+    import ast
+
+    found = []
+    for f in sorted((ROOT / "jaxmech" / "design").glob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                mod = "." * node.level + (node.module or "")
+                if mod.lstrip(".").split(".")[0] == "sweep" or mod.startswith("jaxmech.sweep"):
+                    found.append(f"{f.name}:{node.lineno} {mod}")
+            elif isinstance(node, ast.Import):
+                found += [f"{f.name}:{node.lineno} {a.name}" for a in node.names if a.name.startswith("jaxmech.sweep")]
+    assert not found, found
