@@ -240,6 +240,39 @@ def _flap_sample(p, alpha):
     return q, d1, d2, ok
 
 
+def _flap_rows(points: int, min_transmission: float):
+    """``rows(p, motion) -> Stated`` of the constrained ``flap_msd`` (see ``flap_state``)."""
+    from jaxmech.design.constrained import Stated
+    from jaxmech.scenes.flap_msd import torque_document
+
+    theta0 = _flap_doc_theta_start()
+    floor = float(np.sin(min_transmission))
+
+    def rows(p, mo):
+        theta = mo.q[:, 5]
+        sin_mu = jnp.concatenate([-jnp.sin(mo.q[:, 2] - mo.q[:, 3]), jnp.cos(mo.q[:, 5] + mo.q[:, 4])])
+        return Stated(peak=torque_document(p, mo, corrected=True),
+                      eq=jnp.stack([theta[0] - theta0, theta[-1] - theta[0] - FLAP_TRAVEL]), le=floor - sin_mu)
+
+    return rows
+
+
+@functools.cache
+def flap_stroke_problem(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSION):
+    """The constrained ``flap_msd`` (``flap_state``'s statement) as a
+    ``jaxmech.design.stroke_problem.StrokeProblem``: the engine's position solve at each of
+    ``points`` crank angles from the closed-form (dyad) guess on the scene's branch, 1 rad/s,
+    and the rows of ``flap_state``; its Lagrangian's exact Hessian by the second-order
+    adjoint (``jaxmech.design.minimize_second_order``)."""
+    from jaxmech.design.stroke_problem import StrokeProblem
+    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS, closed_form_positions, mechanism
+
+    base = _jnp(DEFAULTS)
+    return StrokeProblem(mechanism=mechanism, names=FLAP_VARS, params=lambda x: {**base, **x},
+                         us=np.linspace(ALPHA_START, ALPHA_END, points), u_dot=np.ones(points), u_ddot=np.zeros(points),
+                         guess=lambda p, u: closed_form_positions(p, u[0]), rows=_flap_rows(points, float(min_transmission)))
+
+
 @functools.cache
 def flap_state(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSION):
     """``flap_msd`` as an engineer states it, for ``jaxmech.design.constrained``: ``x -> Stated``
@@ -256,26 +289,19 @@ def flap_state(points: int = 101, min_transmission: float = FLAP_MIN_TRANSMISSIO
     """
     import types
 
-    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS, torque_document
+    from jaxmech.scenes.flap_msd import ALPHA_END, ALPHA_START, DEFAULTS
     from jaxmech.design.constrained import Stated
 
     alphas = jnp.linspace(ALPHA_START, ALPHA_END, points)
-    theta0 = _flap_doc_theta_start()
-    floor = float(np.sin(min_transmission))
+    rows = _flap_rows(points, float(min_transmission))
 
     def state(x):
         p = {**_jnp(DEFAULTS), **x}
         q, d1, d2, ok = jax.vmap(_flap_sample, (None, 0))(p, alphas)
         # Constant crank speed 1 rad/s: q_dot = q', q_ddot = q''.
         mo = types.SimpleNamespace(q=q, q_ddot=d2[..., 0, 0], dq_du=d1, u_dot=jnp.ones((points, 1), q.dtype))
-        theta = q[:, 5]
-        sin_mu = jnp.concatenate([-jnp.sin(q[:, 2] - q[:, 3]), jnp.cos(q[:, 5] + q[:, 4])])
-        return Stated(
-            peak=torque_document(p, mo, corrected=True),
-            eq=jnp.stack([theta[0] - theta0, theta[-1] - theta[0] - FLAP_TRAVEL]),
-            le=floor - sin_mu,
-            ok=jnp.all(ok),
-        )
+        s = rows(p, mo)
+        return Stated(peak=s.peak, eq=s.eq, le=s.le, ok=jnp.all(ok))
 
     return state
 

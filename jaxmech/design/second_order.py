@@ -1,18 +1,20 @@
 """Constrained design with exact second derivatives, every start at once.
 
-The problem is stated as in ``jaxmech.design.constrained`` (``state(x) -> Stated``: a peak to make
-least over the stroke samples, equalities, inequalities, assemblability), in epigraph form
-``min t  s.t.  peak_i(x) / peak_scale <= t``, in the box's scaled variables.  Its Lagrangian's
-exact Hessian (every constraint at every stroke sample, through the implicit rule of the
-position solves to second order) feeds a primal-dual interior-point method
-(``design.interior``), and the starts are one vmapped program: a batch of 4 or of 256
-starting designs is one call, and the compile is paid once.
+The problem is stated as in ``jaxmech.design.constrained``: least peak over the stroke
+samples, equalities, inequalities, a box; either as a ``StrokeProblem`` (rows of the
+motion at each sample: its Lagrangian's Hessian by the second-order adjoint of
+``design.stroke_problem``, the cheap program) or as any ``state(x) -> Stated`` (the Hessian
+by forward over reverse mode through the implicit rule of its position solves).  It is
+solved in epigraph form ``min t  s.t.  peak_i(x) / peak_scale <= t``, in the box's scaled
+variables, by the SQP of ``design.sqp`` with that exact Hessian, and the starts are one
+vmapped program: a batch of 4 or of 256 starting designs is one call, and the compile is
+paid once per problem (a second call with the same number of starts compiles nothing).
 
-Unassemblable trial points are the interior-point line search's business: a trial design
-that does not assemble has an infinite merit and the step is halved.  A start that cannot
-be assembled at all is moved halfway towards a reference start (the first) until it can
-(at most 20 times), inside the same program.  Every start ends on the convergence test
-(IPOPT's scaled KKT residual ``E_0 <= tol``) or says why not (``IPStatus``).
+Unassemblable trial points are the SQP's business: a trial design that does not assemble
+has an infinite penalty and the step is shortened.  A start that cannot be assembled at
+all is moved halfway towards the first start until it can (at most 20 times), inside the
+same program.  Every start ends on the convergence test (IPOPT's scaled KKT residual
+``E_0 <= tol``) or says why not (``IPStatus``).
 """
 
 from __future__ import annotations
@@ -21,38 +23,95 @@ import dataclasses
 import functools
 import time
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .constrained import starts_in_box
-from .interior import IP_MESSAGES, IPOptions, IPStatus, interior_point, second_order
+from .interior import IP_MESSAGES, Evaluation, IPStatus
+from .sqp import SQPOptions, sqp
+from .stroke_problem import StrokeEvaluation, StrokeProblem, stroke_evaluator, stroke_sizes
 
-__all__ = ["SecondOrderResult", "epigraph_problem", "minimize_second_order", "local_optima"]
+__all__ = ["SecondOrderResult", "Epigraph", "state_evaluator", "epigraph_evaluator", "minimize_second_order", "local_optima"]
 
 
 def _flat(v, dtype):
     return jnp.zeros((0,), dtype) if v is None else jnp.ravel(jnp.asarray(v, dtype))
 
 
-def epigraph_problem(state: Callable, names: tuple, lo, hi, peak_scale: float):
-    """``problem(xt) -> (f, h, g, ok)`` for ``interior_point``: ``xt`` = the scaled design
-    ``(x - lo) / (hi - lo)`` and the epigraph variable ``t``; ``f = t``; ``h`` the
-    equalities; ``g`` the peaks over ``peak_scale`` less ``t``, the inequalities, and the
-    box rows ``z - 1 <= 0``, ``-z <= 0``."""
-    lo, hi = jnp.asarray(lo), jnp.asarray(hi)
-    width = hi - lo
+def state_evaluator(state: Callable, names: tuple):
+    """``evaluate(x, w) -> StrokeEvaluation`` for a generic ``state({name: scalar}) ->
+    Stated``: the rows (peak, eq, le), their Jacobian (forward mode) and the Hessian of
+    ``w . rows`` (forward over reverse mode), through whatever implicit rules `state` uses."""
 
-    def problem(xt):
-        z, t = xt[:-1], xt[-1]
-        s = state(dict(zip(names, lo + width * z)))
-        dtype = xt.dtype
-        peak = _flat(s.peak, dtype) / peak_scale
-        g = jnp.concatenate([peak - t, _flat(s.le, dtype), z - 1.0, -z])
-        return t, _flat(s.eq, dtype), g, jnp.asarray(s.ok, bool)
+    def rows(x):
+        s = state(dict(zip(names, x)))
+        return jnp.concatenate([_flat(s.peak, x.dtype), _flat(s.eq, x.dtype), _flat(s.le, x.dtype)]), jnp.asarray(s.ok, bool)
 
-    return problem
+    def evaluate(x, w):
+        def both(x_):
+            v, ok = rows(x_)
+            return v, jax.grad(lambda x2: jnp.dot(w, rows(x2)[0]))(x_), ok
+
+        (v, _, ok), lin = jax.linearize(both, x)
+        tan_v, tan_g, _ = jax.vmap(lin)(jnp.eye(x.shape[0], dtype=x.dtype))
+        jac, hess = tan_v.T, 0.5 * (tan_g + tan_g.T)
+        ok = ok & jnp.all(jnp.isfinite(v)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
+        return StrokeEvaluation(v, jac, hess, ok)
+
+    return evaluate
+
+
+def _state_sizes(state: Callable, names: tuple) -> tuple:
+    dtype = jnp.result_type(float)
+    shapes = jax.eval_shape(lambda x: state(dict(zip(names, x))), jax.ShapeDtypeStruct((len(names),), dtype))
+    return tuple(0 if a is None else int(np.prod(a.shape)) for a in (shapes.peak, shapes.eq, shapes.le))
+
+
+class Epigraph(NamedTuple):
+    """The epigraph statement's sizes: `n` design variables, `peaks`, `eq`, `le` rows."""
+
+    n: int
+    peaks: int
+    eq: int
+    le: int
+
+    @property
+    def m(self) -> int:
+        """Inequalities of the statement: the peaks, the limits, the box's two sides."""
+        return self.peaks + self.le + 2 * self.n
+
+
+def epigraph_evaluator(rows_evaluate: Callable, sizes: Epigraph, lo, hi, peak_scale: float):
+    """``evaluate(xt, y, z) -> Evaluation`` of the epigraph statement for ``design.sqp``:
+    ``xt`` = the scaled design ``(x - lo) / (hi - lo)`` and ``t``; ``f = t``; ``h`` the
+    equalities; ``g`` the peaks over `peak_scale` less ``t``, the limits, and the box rows
+    ``z - 1 <= 0``, ``-z <= 0``.  The Lagrangian's Hessian is the rows' (``t`` and the box
+    enter linearly), weighted by the multipliers, in the scaled variables."""
+    lo, width = jnp.asarray(lo), jnp.asarray(hi) - jnp.asarray(lo)
+    n, n_pk, n_eq, n_le = sizes
+
+    def evaluate(xt, y, z):
+        zz, t = xt[:-1], xt[-1]
+        w = jnp.concatenate([z[:n_pk] / peak_scale, y, z[n_pk:n_pk + n_le]])
+        e = rows_evaluate(lo.astype(xt.dtype) + width.astype(xt.dtype) * zz, w)
+        jac = e.jac * width[None, :]
+        pk, eq, le = e.values[:n_pk] / peak_scale, e.values[n_pk:n_pk + n_eq], e.values[n_pk + n_eq:]
+        j_pk, j_eq, j_le = jac[:n_pk] / peak_scale, jac[n_pk:n_pk + n_eq], jac[n_pk + n_eq:]
+        eye = jnp.eye(n, dtype=xt.dtype)
+
+        def col(a, tc):
+            return jnp.concatenate([a, jnp.full((a.shape[0], 1), tc, xt.dtype)], axis=1)
+
+        c = jnp.concatenate([eq, pk - t, le, zz - 1.0, -zz])
+        jc = jnp.concatenate([col(j_eq, 0.0), col(j_pk, -1.0), col(j_le, 0.0), col(eye, 0.0), col(-eye, 0.0)])
+        hess = jnp.zeros((n + 1, n + 1), xt.dtype).at[:n, :n].set(e.hess * width[:, None] * width[None, :])
+        grad = jnp.zeros((n + 1,), xt.dtype).at[n].set(1.0)
+        return Evaluation(t, c, grad, jc, hess, e.ok)
+
+    return evaluate
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,11 +122,12 @@ class SecondOrderResult:
       there (units of the peak; inf if it does not assemble); `violation`: ``(S,)`` largest
       equality or inequality violation (their units).
     - `status`: ``(S,)`` ``IPStatus`` codes; `kkt`: ``(S,)`` scaled KKT residual ``E_0``;
-      `iterations`: ``(S,)``; `pulled`: halvings towards the first start before it assembled.
+      `iterations`: ``(S,)`` (each one evaluation of the problem and its derivatives);
+      `pulled`: halvings towards the first start before it assembled.
     - `best`: the winning start (least value among converged feasible starts, else among
       feasible ones), -1 if none; `optima`: ``[(value, count, first start), ...]`` the
       distinct local optima the converged starts reached (``local_optima``).
-    - `wall_s`: the call's wall time (compile included when it compiled: `compile_s`).
+    - `wall_s`: the call's wall time, `compile_s` included when it compiled.
     """
 
     params: dict
@@ -100,15 +160,15 @@ class SecondOrderResult:
         """The winner, the local optima with how many starts reached each, and why each of
         the first `show` starts stopped."""
         n = len(self.value)
-        head = (f"interior point, exact Hessians: {n} starts in {self.wall_s:.2f} s ({self.compile_s:.2f} s compiling), "
-                f"{self.converged} converged; " + (f"start {self.best} won with {self.value[self.best]:.8g}" if self.best >= 0 else "no feasible start"))
+        head = (f"SQP, exact Hessians: {n} starts in {self.wall_s:.2f} s ({self.compile_s:.2f} s compiling), "
+                f"{self.converged} converged; " + (f"start {self.best} won with {self.value[self.best]:.10g}" if self.best >= 0 else "no feasible start"))
         lines = [head, "local optima (value: starts that reached it, first start): "
-                 + "; ".join(f"{v:.8g}: {c} (start {i})" for v, c, i in self.optima)]
-        lines.append(f"{'start':>5}  {'peak':>14}  {'violation':>9}  {'KKT':>8}  {'iter':>4}  why it stopped")
+                 + "; ".join(f"{v:.10g}: {c} (start {i})" for v, c, i in self.optima)]
+        lines.append(f"{'start':>5}  {'peak':>16}  {'violation':>9}  {'KKT':>8}  {'iter':>4}  why it stopped")
         for i in range(min(n, show)):
             tag = "  <- winner" if i == self.best else ""
             pulled = f" (pulled {int(self.pulled[i])}x towards start 0 to assemble)" if self.pulled[i] else ""
-            lines.append(f"{i:>5}  {self.value[i]:>14.8g}  {self.violation[i]:>9.2g}  {self.kkt[i]:>8.1e}  "
+            lines.append(f"{i:>5}  {self.value[i]:>16.10g}  {self.violation[i]:>9.2g}  {self.kkt[i]:>8.1e}  "
                          f"{int(self.iterations[i]):>4}  {self.message(i)}{pulled}{tag}")
         return "\n".join(lines)
 
@@ -129,61 +189,75 @@ def local_optima(value, z, converged, rtol: float = 1e-7, xtol: float = 1e-5) ->
 
 
 @functools.lru_cache(maxsize=16)
-def _batch_solver(state: Callable, names: tuple, lo: tuple, hi: tuple, peak_scale: float, sizes: tuple, options: IPOptions):
-    """One compiled-on-first-call program: every start's interior-point solve, vmapped
-    (cached per problem, so a second call with the same shapes compiles nothing)."""
-    n_pk, p, n_le = sizes
-    problem = epigraph_problem(state, names, np.array(lo), np.array(hi), peak_scale)
-    evaluate, _ = second_order(problem, p)
-    m = n_pk + n_le + 2 * len(names)
+def _batch_solver(problem, names: tuple, lo: tuple, hi: tuple, peak_scale: float, sizes: Epigraph, options: SQPOptions):
+    """One program, compiled on its first call: every start's SQP, vmapped, from the scaled
+    starts ``(S, n)`` (``t`` set just above each start's largest peak by one evaluation)
+    and the reference start.  Cached per problem: a second call compiles nothing."""
+    rows = stroke_evaluator(problem) if isinstance(problem, StrokeProblem) else state_evaluator(problem, names)
+    evaluate = epigraph_evaluator(rows, sizes, np.array(lo), np.array(hi), peak_scale)
+    n, n_pk, n_eq, _ = sizes
 
-    def prepare(xt, c):
-        # the epigraph variable starts just above the start's largest peak (t enters the peak
-        # rows as -t: their largest value is the amount t must rise)
-        top = jnp.max(c[p: p + n_pk], initial=-jnp.inf)
-        return xt.at[-1].add(jnp.where(jnp.isfinite(top), top + 1e-3, 0.0))
+    def prepare(xt, ev):
+        # t just above the start's largest peak: t enters the peak rows alone, as -t
+        top = jnp.max(ev.c[n_eq:n_eq + n_pk] + xt[-1], initial=-jnp.inf)
+        t = jnp.where(jnp.isfinite(top), top + 1e-6, xt[-1])
+        return xt.at[-1].set(t), ev._replace(f=t, c=ev.c.at[n_eq:n_eq + n_pk].add(xt[-1] - t))
 
-    def one(xt0, ref):
-        return interior_point(evaluate, xt0, p, m, options, ref=ref, prepare=prepare if n_pk else None)
+    def one(z0, ref):
+        # Stationarity in t asks the peak rows' multipliers to sum to one: start them uniform
+        zm = jnp.zeros((sizes.m,), z0.dtype).at[:n_pk].set(1.0 / max(n_pk, 1))
+        t0 = jnp.zeros((1,), z0.dtype)
+        return sqp(evaluate, jnp.concatenate([z0, t0]), jnp.zeros((n_eq,), z0.dtype), zm, options, ref=jnp.concatenate([ref, t0]),
+                   prepare=prepare if n_pk else None)
 
     return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
-def minimize_second_order(state: Callable, x0: Mapping, bounds: Mapping[str, tuple[float, float]], *, peak_scale: float = 1.0,
-                          options: IPOptions = IPOptions(), feas_tol: float = 1e-8) -> SecondOrderResult:
+def minimize_second_order(problem: StrokeProblem | Callable, x0: Mapping, bounds: Mapping[str, tuple[float, float]], *,
+                          peak_scale: float = 1.0, options: SQPOptions = SQPOptions(), feas_tol: float = 1e-8) -> SecondOrderResult:
     """Solve ``min max_i peak_i(x)  s.t.  eq(x) = 0, le(x) <= 0, bounds`` from every start
     at once, with exact second derivatives (module docstring).
 
-    **Arguments**: as ``constrained.minimize``: `state` ``({name: scalar}) -> Stated``; `x0`
+    **Arguments**: `problem` a ``StrokeProblem`` (its `names` are the design variables) or
+    ``state({name: scalar}) -> Stated`` as for ``constrained.minimize``; `x0`
     ``{name: (S,)}`` starts; `bounds` ``{name: (low, high)}``; `peak_scale` a typical size
-    of the peak; `options` the interior point's ``IPOptions`` (``tol``: the scaled KKT
-    residual that ends a start); `feas_tol`: largest violation a winner may have.
+    of the peak; `options` the ``SQPOptions`` (``tol``: the scaled KKT residual that ends
+    a start); `feas_tol`: largest violation a winner may have.
 
     **Returns** a ``SecondOrderResult``: every start's design, peak, violation, status and
     KKT residual, the winner, and the local optima with how many starts reached each.
     """
     names, starts, lo, hi = starts_in_box(x0, bounds, "minimize_second_order")
+    if isinstance(problem, StrokeProblem):
+        if set(names) != set(problem.names):
+            raise ValueError(f"minimize_second_order: x0 names {names} must be the problem's design variables {problem.names}")
+        order = [names.index(k) for k in problem.names]
+        names, starts, lo, hi = problem.names, starts[:, order], lo[order], hi[order]
+        sizes = Epigraph(len(names), *stroke_sizes(problem))
+    else:
+        sizes = Epigraph(len(names), *_state_sizes(problem, names))
     width = hi - lo
-    z0 = np.clip((starts - lo) / width, 0.0, 1.0)
-    xt0 = np.concatenate([z0, np.zeros((z0.shape[0], 1))], axis=1)
     dtype = jnp.result_type(float)
-    shapes = jax.eval_shape(lambda x: state(dict(zip(names, x))), jax.ShapeDtypeStruct((len(names),), dtype))
-    sizes = tuple(0 if a is None else int(np.prod(a.shape)) for a in (shapes.peak, shapes.eq, shapes.le))
-    solve = _batch_solver(state, names, tuple(lo), tuple(hi), float(peak_scale), sizes, options)
+    z0 = jnp.asarray(np.clip((starts - lo) / width, 0.0, 1.0), dtype)
+    solve = _batch_solver(problem, names, tuple(lo), tuple(hi), float(peak_scale), sizes, options)
     t0 = time.perf_counter()
-    compiled = solve.lower(jnp.asarray(xt0, dtype), jnp.asarray(xt0[0], dtype)).compile()
+    compiled = solve.lower(z0, z0[0]).compile()
     compile_s = time.perf_counter() - t0
-    st, pulled = jax.block_until_ready(compiled(jnp.asarray(xt0, dtype), jnp.asarray(xt0[0], dtype)))
+    st, pulled = jax.block_until_ready(compiled(z0, z0[0]))
     wall = time.perf_counter() - t0
-    n_pk, p, n_le = sizes
+    return _result(st, pulled, sizes, lo, width, names, peak_scale, feas_tol, wall, compile_s)
+
+
+def _result(st, pulled, sizes: Epigraph, lo, width, names, peak_scale, feas_tol, wall, compile_s) -> SecondOrderResult:
+    n, n_pk, p, n_le = sizes
     c = np.asarray(st.c)
-    ok = np.isfinite(np.asarray(st.f)) & (np.asarray(st.status) != IPStatus.START_NOT_EVALUATED)
+    status = np.asarray(st.status)
+    ok = np.isfinite(np.asarray(st.f)) & (status != IPStatus.START_NOT_EVALUATED)
     t = np.asarray(st.x)[:, -1]
     peak = (c[:, p: p + n_pk] + t[:, None]) * peak_scale
     value = np.where(ok, np.max(peak, axis=1, initial=-np.inf), np.inf)
     viol = np.max(np.concatenate([np.abs(c[:, :p]), np.maximum(c[:, p + n_pk: p + n_pk + n_le], 0.0), np.zeros((c.shape[0], 1))], axis=1), axis=1)
     viol = np.where(ok, viol, np.inf)
-    status = np.asarray(st.status)
     z = np.asarray(st.x)[:, :-1]
     feasible = ok & (viol <= feas_tol)
     conv = feasible & (status == IPStatus.CONVERGED)
@@ -194,3 +268,4 @@ def minimize_second_order(state: Callable, x0: Mapping, bounds: Mapping[str, tup
         params={k: x[:, i] for i, k in enumerate(names)}, value=value, violation=viol, status=status,
         kkt=np.asarray(st.error), iterations=np.asarray(st.k), pulled=np.asarray(pulled), best=best,
         optima=local_optima(value, z, conv), feas_tol=feas_tol, wall_s=wall, compile_s=compile_s)
+
