@@ -15,8 +15,11 @@ tolerance and costs about one extra stroke evaluation whatever the number of par
   start won and why each of the others stopped.
 - ``constrained`` (``minimize``, ``program``, ``Stated``): a design problem as an engineer
   states it (least peak over the stroke, equalities, limits, a box), solved by scipy's SLSQP
-  fed one compiled program of exact Jacobians; ``second_order``: the same statement by an
-  interior-point method with exact Hessians.
+  fed one compiled program of exact Jacobians; ``minimize_second_order``: the same statement
+  by an SQP with exact Hessians (``sqp``, its QPs by ``qp``), every start in one vmapped
+  program; a ``StrokeProblem`` (rows of the motion at each stroke sample) gets its
+  Lagrangian's Hessian by a second-order adjoint (``stroke_problem``), a program several
+  times smaller than nested automatic differentiation through the solver.
 - ``tolerance`` (``analyse``, ``monte_carlo``): the spread of figures from manufacturing
   tolerances, first order (forward-mode Jacobians, ``batch_jacobian``) and by sampling.
 - ``synthesize_path`` finds a four-bar whose coupler curve passes through (or nearest to)
@@ -36,6 +39,10 @@ from .fitting import StopReason as StopReason
 from .fitting import fit as fit
 from .sensitivities import Sensitivities as Sensitivities
 from .sensitivities import sensitivities as sensitivities
+from .second_order import SecondOrderResult as SecondOrderResult
+from .second_order import minimize_second_order as minimize_second_order
+from .sqp import SQPOptions as SQPOptions
+from .stroke_problem import StrokeProblem as StrokeProblem
 from .synthesis import PathError as PathError
 from .synthesis import PathSynthesis as PathSynthesis
 from .synthesis import coupler_curve as coupler_curve
@@ -52,6 +59,10 @@ __all__ = [
     "peak",
     "scene_figure",
     "sensitivities",
+    "SQPOptions",
+    "SecondOrderResult",
+    "StrokeProblem",
+    "minimize_second_order",
     "PathError",
     "PathSynthesis",
     "coupler_curve",

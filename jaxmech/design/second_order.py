@@ -8,13 +8,14 @@ by forward over reverse mode through the implicit rule of its position solves). 
 solved in epigraph form ``min t  s.t.  peak_i(x) / peak_scale <= t``, in the box's scaled
 variables, by the SQP of ``design.sqp`` with that exact Hessian, and the starts are one
 vmapped program: a batch of 4 or of 256 starting designs is one call, and the compile is
-paid once per problem (a second call with the same number of starts compiles nothing).
+paid once per problem and number of starts; a ``StrokeProblem``'s program is stored
+(``jaxmech.stored``), so a new process loads it instead of compiling.
 
 Unassemblable trial points are the SQP's business: a trial design that does not assemble
 has an infinite penalty and the step is shortened.  A start that cannot be assembled at
 all is moved halfway towards the first start until it can (at most 20 times), inside the
 same program.  Every start ends on the convergence test (IPOPT's scaled KKT residual
-``E_0 <= tol``) or says why not (``IPStatus``).
+``E_0 <= tol``) or says why not (``Status``).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .constrained import starts_in_box
-from .interior import IP_MESSAGES, Evaluation, IPStatus
+from .nlp import STATUS_MESSAGES, Evaluation, Status
+from ..xla import jit
 from .sqp import SQPOptions, sqp
 from .stroke_problem import StrokeEvaluation, StrokeProblem, stroke_evaluator, stroke_sizes
 
@@ -121,13 +123,15 @@ class SecondOrderResult:
     - `params`: ``{name: (S,)}`` final designs; `value`: ``(S,)`` the largest peak sample
       there (units of the peak; inf if it does not assemble); `violation`: ``(S,)`` largest
       equality or inequality violation (their units).
-    - `status`: ``(S,)`` ``IPStatus`` codes; `kkt`: ``(S,)`` scaled KKT residual ``E_0``;
+    - `status`: ``(S,)`` ``Status`` codes; `kkt`: ``(S,)`` scaled KKT residual ``E_0``;
       `iterations`: ``(S,)`` (each one evaluation of the problem and its derivatives);
       `pulled`: halvings towards the first start before it assembled.
     - `best`: the winning start (least value among converged feasible starts, else among
       feasible ones), -1 if none; `optima`: ``[(value, count, first start), ...]`` the
       distinct local optima the converged starts reached (``local_optima``).
-    - `wall_s`: the call's wall time, `compile_s` included when it compiled.
+    - `wall_s`: the call's wall time (its compile included when this process compiled the
+      program: the first call for a problem and a number of starts, unless a stored
+      executable was loaded).
     """
 
     params: dict
@@ -141,11 +145,10 @@ class SecondOrderResult:
     optima: list
     feas_tol: float
     wall_s: float
-    compile_s: float
 
     @property
     def converged(self) -> int:
-        return int(np.sum(self.status == IPStatus.CONVERGED))
+        return int(np.sum(self.status == Status.CONVERGED))
 
     @property
     def best_params(self) -> dict[str, float]:
@@ -154,13 +157,13 @@ class SecondOrderResult:
         return {k: float(v[self.best]) for k, v in self.params.items()}
 
     def message(self, i: int) -> str:
-        return IP_MESSAGES[IPStatus(int(self.status[i]))]
+        return STATUS_MESSAGES[Status(int(self.status[i]))]
 
     def report(self, show: int = 12) -> str:
         """The winner, the local optima with how many starts reached each, and why each of
         the first `show` starts stopped."""
         n = len(self.value)
-        head = (f"SQP, exact Hessians: {n} starts in {self.wall_s:.2f} s ({self.compile_s:.2f} s compiling), "
+        head = (f"SQP, exact Hessians: {n} starts in {self.wall_s:.2f} s, "
                 f"{self.converged} converged; " + (f"start {self.best} won with {self.value[self.best]:.10g}" if self.best >= 0 else "no feasible start"))
         lines = [head, "local optima (value: starts that reached it, first start): "
                  + "; ".join(f"{v:.10g}: {c} (start {i})" for v, c, i in self.optima)]
@@ -188,14 +191,14 @@ def local_optima(value, z, converged, rtol: float = 1e-7, xtol: float = 1e-5) ->
     return sorted((tuple(g) for g in groups), key=lambda g: g[0])
 
 
-@functools.lru_cache(maxsize=16)
-def _batch_solver(problem, names: tuple, lo: tuple, hi: tuple, peak_scale: float, sizes: Epigraph, options: SQPOptions):
-    """One program, compiled on its first call: every start's SQP, vmapped, from the scaled
-    starts ``(S, n)`` (``t`` set just above each start's largest peak by one evaluation)
-    and the reference start.  Cached per problem: a second call compiles nothing."""
+@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4, 5, 6), stored=True)
+def _solve_batch(problem, names: tuple, lo: tuple, hi: tuple, peak_scale: float, sizes: Epigraph, options: SQPOptions, z0, ref):
+    """Every start's SQP, vmapped, from the scaled starts ``z0 (S, n)`` and the reference
+    start ``ref (n,)``: one program, compiled on its first call for these static arguments
+    and shapes (a ``StrokeProblem``'s program is stored: a new process loads it)."""
     rows = stroke_evaluator(problem) if isinstance(problem, StrokeProblem) else state_evaluator(problem, names)
     evaluate = epigraph_evaluator(rows, sizes, np.array(lo), np.array(hi), peak_scale)
-    n, n_pk, n_eq, _ = sizes
+    n_pk, n_eq = sizes.peaks, sizes.eq
 
     def prepare(xt, ev):
         # t just above the start's largest peak: t enters the peak rows alone, as -t
@@ -203,14 +206,14 @@ def _batch_solver(problem, names: tuple, lo: tuple, hi: tuple, peak_scale: float
         t = jnp.where(jnp.isfinite(top), top + 1e-6, xt[-1])
         return xt.at[-1].set(t), ev._replace(f=t, c=ev.c.at[n_eq:n_eq + n_pk].add(xt[-1] - t))
 
-    def one(z0, ref):
+    def one(z_start):
         # Stationarity in t asks the peak rows' multipliers to sum to one: start them uniform
-        zm = jnp.zeros((sizes.m,), z0.dtype).at[:n_pk].set(1.0 / max(n_pk, 1))
-        t0 = jnp.zeros((1,), z0.dtype)
-        return sqp(evaluate, jnp.concatenate([z0, t0]), jnp.zeros((n_eq,), z0.dtype), zm, options, ref=jnp.concatenate([ref, t0]),
-                   prepare=prepare if n_pk else None)
+        zm = jnp.zeros((sizes.m,), z_start.dtype).at[:n_pk].set(1.0 / max(n_pk, 1))
+        t0 = jnp.zeros((1,), z_start.dtype)
+        return sqp(evaluate, jnp.concatenate([z_start, t0]), jnp.zeros((n_eq,), z_start.dtype), zm, options,
+                   ref=jnp.concatenate([ref, t0]), prepare=prepare if n_pk else None)
 
-    return jax.jit(jax.vmap(one, in_axes=(0, None)))
+    return jax.vmap(one)(z0)
 
 
 def minimize_second_order(problem: StrokeProblem | Callable, x0: Mapping, bounds: Mapping[str, tuple[float, float]], *,
@@ -239,20 +242,17 @@ def minimize_second_order(problem: StrokeProblem | Callable, x0: Mapping, bounds
     width = hi - lo
     dtype = jnp.result_type(float)
     z0 = jnp.asarray(np.clip((starts - lo) / width, 0.0, 1.0), dtype)
-    solve = _batch_solver(problem, names, tuple(lo), tuple(hi), float(peak_scale), sizes, options)
     t0 = time.perf_counter()
-    compiled = solve.lower(z0, z0[0]).compile()
-    compile_s = time.perf_counter() - t0
-    st, pulled = jax.block_until_ready(compiled(z0, z0[0]))
-    wall = time.perf_counter() - t0
-    return _result(st, pulled, sizes, lo, width, names, peak_scale, feas_tol, wall, compile_s)
+    st, pulled = jax.block_until_ready(_solve_batch(problem, names, tuple(map(float, lo)), tuple(map(float, hi)), float(peak_scale),
+                                                    sizes, options, z0, z0[0]))
+    return _result(st, pulled, sizes, lo, width, names, peak_scale, feas_tol, time.perf_counter() - t0)
 
 
-def _result(st, pulled, sizes: Epigraph, lo, width, names, peak_scale, feas_tol, wall, compile_s) -> SecondOrderResult:
+def _result(st, pulled, sizes: Epigraph, lo, width, names, peak_scale, feas_tol, wall) -> SecondOrderResult:
     n, n_pk, p, n_le = sizes
     c = np.asarray(st.c)
     status = np.asarray(st.status)
-    ok = np.isfinite(np.asarray(st.f)) & (status != IPStatus.START_NOT_EVALUATED)
+    ok = np.isfinite(np.asarray(st.f)) & (status != Status.START_NOT_EVALUATED)
     t = np.asarray(st.x)[:, -1]
     peak = (c[:, p: p + n_pk] + t[:, None]) * peak_scale
     value = np.where(ok, np.max(peak, axis=1, initial=-np.inf), np.inf)
@@ -260,12 +260,12 @@ def _result(st, pulled, sizes: Epigraph, lo, width, names, peak_scale, feas_tol,
     viol = np.where(ok, viol, np.inf)
     z = np.asarray(st.x)[:, :-1]
     feasible = ok & (viol <= feas_tol)
-    conv = feasible & (status == IPStatus.CONVERGED)
+    conv = feasible & (status == Status.CONVERGED)
     pool = conv if np.any(conv) else feasible
     best = int(np.argmin(np.where(pool, value, np.inf))) if np.any(pool) else -1
     x = lo + width * z
     return SecondOrderResult(
         params={k: x[:, i] for i, k in enumerate(names)}, value=value, violation=viol, status=status,
         kkt=np.asarray(st.error), iterations=np.asarray(st.k), pulled=np.asarray(pulled), best=best,
-        optima=local_optima(value, z, conv), feas_tol=feas_tol, wall_s=wall, compile_s=compile_s)
+        optima=local_optima(value, z, conv), feas_tol=feas_tol, wall_s=wall)
 

@@ -12,7 +12,7 @@ Each iteration solves the quadratic model at the iterate ``x`` with the multipli
 
 by ``design.qp`` (a convex QP: Mehrotra's interior point), where ``B`` is the exact Hessian
 of the Lagrangian ``W = Hess(f + y.h + z.g)`` (forward over reverse mode, through the
-implicit rule of every position solve: ``design.stroke_problem`` or ``interior.second_order``)
+implicit rule of every position solve: ``design.stroke_problem`` or ``nlp.second_order``)
 made positive definite: ``B = W + rho J_A' J_A + delta I``, with ``J_A`` the equalities and
 the inequalities whose multiplier is positive (curvature the constraints already fix:
 on the active constraints' null space ``B = W``, so the step is Newton's and the local
@@ -29,7 +29,7 @@ itself backs off** (no made-up violation reaches the model).
 
 A start ends when IPOPT's scaled KKT residual ``E_0`` (dual residual over ``s_d``, primal
 infeasibility, complementarity ``|z_i g_i|`` over ``s_c``) is at most ``tol``, or says why
-not (``IPStatus``).  The loop evaluates the problem once per iteration at one call site, so
+not (``Status``).  The loop evaluates the problem once per iteration at one call site, so
 the compiled program holds one copy of the problem and its derivatives, and one QP solve.
 """
 
@@ -43,7 +43,7 @@ import jax.numpy as jnp
 
 from ..linalg import where
 from ..newton import per_lane
-from .interior import Evaluation, IPStatus, cholesky_small, kkt_error
+from .nlp import Evaluation, Status, cholesky_small, kkt_error
 from .qp import solve_qp
 
 __all__ = ["SQPOptions", "SQPState", "SQPLoop", "sqp", "modified_hessian", "merit"]
@@ -176,7 +176,7 @@ def initial_loop(x0, y0, z0, p: int, m: int) -> SQPLoop:
     zero_i = jnp.zeros((), jnp.int32)
     st = SQPState(k=zero_i, x=x0, y=y0, z=z0, f=nan, c=jnp.full((p + m,), nan), grad=jnp.zeros((n,), dtype),
                   jac=jnp.zeros((p + m, n), dtype), hess=jnp.zeros((n, n), dtype), error=jnp.asarray(jnp.inf, dtype),
-                  nu=jnp.asarray(1.0, dtype), status=jnp.asarray(IPStatus.MAX_ITERATIONS, jnp.int32), done=jnp.asarray(False))
+                  nu=jnp.asarray(1.0, dtype), status=jnp.asarray(Status.MAX_ITERATIONS, jnp.int32), done=jnp.asarray(False))
     return SQPLoop(st=st, phase=zero_i, pulled=zero_i, xt=x0, yt=y0, zt=z0, d=jnp.zeros((n,), dtype), alpha=jnp.ones((), dtype), lm=jnp.zeros((), dtype),
                    soc=zero_i, phi0=nan, dphi=nan, pred=nan, backtracks=zero_i)
 
@@ -213,14 +213,18 @@ def judge(lp: SQPLoop, ev: Evaluation, p: int, o: SQPOptions, prepare=None) -> _
     return _Judged(cur, accept, start & ~ev.ok, ev.ok), ev
 
 
-def _damping(lp: SQPLoop, j: _Judged, scale):
-    """The damping of the next direction, as a trust region's radius: after a full step
-    accepted (or its correction), a third (none once negligible); after a step that had
-    to be shortened to a quarter or less, four times (at least ``1e-4`` of the Hessian's
-    scale); otherwise kept."""
+def _damping(lp: SQPLoop, j: _Judged, ev: Evaluation, scale, p: int):
+    """The damping of the next direction, as a trust region's radius.  After a full step
+    (or its correction) accepted, by the ratio ``r`` of the penalty's actual to predicted
+    decrease: ``r > 3/4`` a third (none once negligible), ``r < 1/4`` twice; after a step
+    accepted only once shortened to ``alpha``, ``2 / alpha`` times (at least ``1e-4`` of
+    the Hessian's scale): the next step is then about as long as the one that worked."""
+    actual = lp.phi0 - merit(ev.f, ev.c, lp.st.nu, p)
+    r = actual / jnp.maximum(lp.pred, 1e-300)
     down = jnp.where(lp.lm > 1e-10 * scale, lp.lm / 3.0, 0.0)
-    up = jnp.maximum(4.0 * lp.lm, 1e-4 * scale)
-    return where(j.accept, where(lp.alpha >= 1.0, down, where(lp.alpha <= 0.25, up, lp.lm)), lp.lm)
+    full = where(r > 0.75, down, where(r < 0.25, jnp.maximum(2.0 * lp.lm, 1e-4 * scale), lp.lm))
+    short = jnp.maximum(2.0 * lp.lm / lp.alpha, 1e-4 * scale)
+    return where(j.accept, where(lp.alpha >= 1.0, full, short), lp.lm)
 
 
 def step(lp: SQPLoop, j: _Judged, ev: Evaluation, ref, p: int, o: SQPOptions) -> SQPLoop:
@@ -236,7 +240,7 @@ def step(lp: SQPLoop, j: _Judged, ev: Evaluation, ref, p: int, o: SQPOptions) ->
     jh, jg = cur.jac[:p], cur.jac[p:]
     use_soc = ~j.accept & (lp.alpha >= 1.0) & (lp.soc < o.max_soc) & j.ok & (lp.phase == 1)
     scale = jnp.maximum(jnp.max(jnp.abs(jnp.diagonal(cur.hess))), 1.0)
-    lm = _damping(lp, j, scale)
+    lm = _damping(lp, j, ev, scale, p)
     # the QP: at the iterate, or (second-order correction) with the trial's constraint values
     c_qp = where(use_soc, ev.c - cur.jac @ (lp.xt - cur.x), cur.c)
     B, b_ok = modified_hessian(cur.hess, cur.jac, cur.z, p, o.active)
@@ -249,8 +253,8 @@ def step(lp: SQPLoop, j: _Judged, ev: Evaluation, ref, p: int, o: SQPOptions) ->
     small = ~j.accept & (backtracks >= o.max_backtrack) & (lp.phase == 1)
     give_up = j.start_bad & (lp.pulled >= 20)
     bad = ~(finite & b_ok) & ~converged & (j.accept | use_soc)
-    status = where(converged, IPStatus.CONVERGED, where(give_up, IPStatus.START_NOT_EVALUATED,
-                   where(bad, IPStatus.NONFINITE, where(small, IPStatus.SMALL_STEP, IPStatus.MAX_ITERATIONS))))
+    status = where(converged, Status.CONVERGED, where(give_up, Status.START_NOT_EVALUATED,
+                   where(bad, Status.NONFINITE, where(small, Status.SMALL_STEP, Status.MAX_ITERATIONS))))
     done = converged | give_up | bad | small
     cur = cur._replace(nu=nu, status=status.astype(jnp.int32), done=done)
     fresh = j.accept | (lp.phase == 0)
@@ -269,7 +273,7 @@ def step(lp: SQPLoop, j: _Judged, ev: Evaluation, ref, p: int, o: SQPOptions) ->
 
 def sqp(evaluate, x0, y0, z0, options: SQPOptions = SQPOptions(), ref=None, prepare=None):
     """Solve one start (vmap it for a batch).  `evaluate(x, y, z) -> Evaluation` as
-    ``interior.second_order`` or ``stroke_problem`` give it; `x0` ``(n,)``; `y0` ``(p,)``,
+    ``nlp.second_order`` or ``stroke_problem`` give it; `x0` ``(n,)``; `y0` ``(p,)``,
     `z0` ``(m,)`` the multipliers whose Lagrangian Hessian models the first step (for an
     epigraph statement: ``1/N`` on each of its ``N`` peak rows, which the objective's
     stationarity in ``t`` asks to sum to one).  A start that cannot be evaluated is moved

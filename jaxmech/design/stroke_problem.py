@@ -30,6 +30,8 @@ flap_msd statement: see ``benchmarks/design.py``).
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -96,6 +98,35 @@ class StrokeProblem:
             raise ValueError(f"StrokeProblem: us, u_dot and u_ddot must have the same number of samples, got "
                              f"{self.us.shape[0]}, {self.u_dot.shape[0]}, {self.u_ddot.shape[0]}")
         object.__setattr__(self, "names", tuple(self.names))
+
+    @functools.cached_property
+    def program_key(self) -> str | None:
+        """A fingerprint of what a compiled program of this problem depends on (the
+        mechanism's, the names, the stroke, the options and the traced programs of
+        `params`, `guess` and `rows`), equal for identical problems in any process; None
+        when the mechanism has none or a function does not trace (then nothing is stored)."""
+        mech_key = self.mechanism.program_key
+        if mech_key is None:
+            return None
+        dtype = jnp.zeros(()).dtype
+        digest = hashlib.sha256(repr((mech_key, self.names, repr(self.options), str(dtype))).encode())
+        for a in (self.us, self.u_dot, self.u_ddot):
+            digest.update(repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
+        x = {k: jax.ShapeDtypeStruct((), dtype) for k in self.names}
+        try:
+            p = jax.eval_shape(self.params, x)
+            n, m, dof = self.us.shape[0], self.mechanism.m, self.mechanism.dof
+            y = _Motion(*(jax.ShapeDtypeStruct(s, dtype) for s in ((n, m), (n, m, dof), (n, m, dof, dof))))
+            traced = (jax.make_jaxpr(self.params)(x), jax.make_jaxpr(self.guess)(p, jax.ShapeDtypeStruct((dof,), dtype)),
+                      jax.make_jaxpr(lambda p_, y_: self.rows(p_, _motion(self, y_, dtype)))(p, y))
+        except Exception:  # noqa: BLE001 - a function that does not trace: no key (its error shows when solved)
+            return None
+        for closed in traced:
+            digest.update(str(closed.jaxpr).encode())
+            for c in closed.consts:
+                c = np.asarray(c)
+                digest.update(repr((c.shape, str(c.dtype))).encode() + c.tobytes())
+        return digest.hexdigest()
 
 
 class StrokeEvaluation(NamedTuple):

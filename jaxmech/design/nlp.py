@@ -1,0 +1,118 @@
+"""What the constrained optimiser of the design layer works on: a nonlinear program's
+evaluation with exact second derivatives, its statuses, its KKT residual, and a Cholesky
+factorisation written in JAX.
+
+The problem, in scaled variables ``x``::
+
+    min f(x)   s.t.   h(x) = 0  (p equalities),   g(x) <= 0  (m inequalities, box rows included)
+
+``second_order`` turns a function ``problem(x) -> (f, h, g, ok)`` into
+``evaluate(x, y, z) -> Evaluation``: values, the constraints' Jacobian and the Hessian of the
+Lagrangian ``f + y.h + z.g`` (forward over reverse mode, through whatever implicit rules
+``problem`` uses); ``design.stroke_problem`` gives the same for a problem over a stroke by a
+second-order adjoint; ``design.sqp`` solves either.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["Status", "STATUS_MESSAGES", "Evaluation", "second_order", "cholesky_small", "kkt_error"]
+
+
+class Status(enum.IntEnum):
+    """How a start ended."""
+
+    CONVERGED = 0  #: scaled KKT residual <= tol
+    MAX_ITERATIONS = 1  #: the iteration budget ran out first
+    SMALL_STEP = 2  #: the line search could not find an acceptable step
+    START_NOT_EVALUATED = 3  #: the start cannot be evaluated (does not assemble)
+    NONFINITE = 4  #: a derivative or a step was not finite
+
+
+STATUS_MESSAGES = {
+    Status.CONVERGED: "converged: scaled KKT residual within tolerance",
+    Status.MAX_ITERATIONS: "stopped on the iteration limit before the KKT residual met the tolerance",
+    Status.SMALL_STEP: "the line search found no acceptable step (every shorter or corrected step failed or did not decrease the penalty)",
+    Status.START_NOT_EVALUATED: "the start cannot be evaluated (the design does not assemble there)",
+    Status.NONFINITE: "a derivative or a step was not finite",
+}
+
+
+class Evaluation(NamedTuple):
+    """The problem and its derivatives at one point (``second_order``'s ``evaluate``): the
+    objective `f`, the constraints `c` (``h`` then ``g``), ``grad f``, the constraints'
+    Jacobian `jac` ``(p + m, n)``, the Hessian `hess` of the Lagrangian, and `ok` (finite
+    and evaluable)."""
+
+    f: jax.Array
+    c: jax.Array
+    grad: jax.Array
+    jac: jax.Array
+    hess: jax.Array
+    ok: jax.Array
+
+
+def second_order(problem: Callable, p: int):
+    """``evaluate(x, y, z) -> Evaluation(f, c, grad f, J_c, W, ok)`` from ``problem(x) -> (f, h, g, ok)``
+    (``h (p,)``, ``g (m,)``): values, the constraints' Jacobian and the Hessian ``W`` of the
+    Lagrangian ``f + y.h + z.g``, by one linearisation of ``x -> (values, grad L)`` (forward
+    over reverse mode) with the ``n`` unit tangents at once."""
+
+    def values(x):
+        f, h, g, ok = problem(x)
+        return jnp.concatenate([jnp.reshape(f, (1,)), h, g]), ok
+
+    def evaluate(x, y, z):
+        w = jnp.concatenate([jnp.ones((1,), x.dtype), y, z])
+
+        def both(x_):
+            v, ok = values(x_)
+            grad_l = jax.grad(lambda x2: jnp.dot(w, values(x2)[0]))(x_)
+            return v, grad_l, ok
+
+        (v, grad_l, ok), lin = jax.linearize(lambda x_: both(x_), x)
+        tan_v, tan_g, _ = jax.vmap(lin)(jnp.eye(x.shape[0], dtype=x.dtype))
+        jac = tan_v.T  # (1 + p + m, n)
+        hess = 0.5 * (tan_g + tan_g.T)
+        ok = ok & jnp.all(jnp.isfinite(v)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
+        return Evaluation(v[0], v[1:], jac[0], jac[1:], hess, ok)
+
+    return evaluate, values
+
+
+def cholesky_small(a):
+    """``(L, ok)``: the Cholesky factor of a small symmetric matrix, a column per step of a
+    ``fori_loop`` (compact to compile; no LAPACK call, see ``stored.calls_lapack``); ``ok``
+    False where a pivot is not positive (``L`` is then not to be used)."""
+    n = a.shape[0]
+    rows = jnp.arange(n)
+
+    def column(j, carry):
+        L, ok = carry
+        lj = L[j]  # row j: its entries left of j are final, the rest zero
+        d = a[j, j] - lj @ lj
+        ok = ok & (d > 0)
+        ljj = jnp.sqrt(jnp.where(d > 0, d, 1.0))
+        col = (a[:, j] - L @ lj) / ljj
+        col = jnp.where(rows > j, col, jnp.where(rows == j, ljj, 0.0))
+        return L.at[:, j].set(col), ok
+
+    return jax.lax.fori_loop(0, n, column, (jnp.zeros_like(a), jnp.asarray(True)))
+
+
+def kkt_error(grad, jac, y, z, s, c, p, mu, s_max):
+    """IPOPT's scaled optimality error ``E_mu`` (``mu = 0``: of the problem itself)."""
+    m = z.shape[0]
+    h, g = c[:p], c[p:]
+    r_d = grad + jac.T @ jnp.concatenate([y, z])
+    s_d = jnp.maximum(s_max, (jnp.sum(jnp.abs(y)) + jnp.sum(jnp.abs(z))) / max(p + m, 1)) / s_max
+    s_c = jnp.maximum(s_max, jnp.sum(jnp.abs(z)) / max(m, 1)) / s_max
+    primal = jnp.maximum(jnp.max(jnp.abs(h), initial=0.0), jnp.max(jnp.abs(g + s), initial=0.0))
+    comp = jnp.max(jnp.abs(s * z - mu), initial=0.0) / s_c
+    return jnp.maximum(jnp.maximum(jnp.max(jnp.abs(r_d)) / s_d, primal), comp)
