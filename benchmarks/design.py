@@ -277,85 +277,11 @@ def bench_problem(problem):
     return row
 
 
-def bench_flap_problem(points=POINTS, starts=4):
-    """flap_msd side by side: Nelder-Mead on the eliminated smooth-peak objective (the
-    issue-5 statement) and the constrained statement (epigraph peak, equalities, box)
-    solved by SLSQP with exact implicit Jacobians, from the same starting designs.
+def bench_flap_problem():
+    """flap_msd's constrained design: ``benchmarks/design_flap.py``."""
+    from benchmarks.design_flap import bench_flap_problem as run
 
-    Nelder-Mead's wall time to its own final value excludes compiling its objective (one
-    warm-up call before the clock starts); the gradient method's wall time includes
-    compiling its one program (run with ``JAXMECH_COMPILE_CACHE=0`` so nothing comes from
-    disk)."""
-    import jax
-    from scipy.optimize import minimize as scipy_minimize
-
-    from jaxmech.design.constrained import minimize, program
-    from examples.design_problems import (FLAP_ELIMINATED, FLAP_FREE, FLAP_VARS, flap_bounds, flap_eliminated, flap_msd_objective,
-                                  flap_starts, flap_state, flap_state_bounds)
-    from jaxmech.scenes.flap_msd import DEFAULTS
-
-    free0 = flap_starts(starts)
-    rows = {}
-    # --- gradient: the constrained statement; min_transmission = 0 is Nelder-Mead's problem
-    # (assemblable on the branch, nothing more); 20 deg is the engineering default.
-    x0 = {**free0, **{k: np.full(starts, DEFAULTS[k]) for k in FLAP_ELIMINATED}}
-    for label, mu in (("gradient", 0.0), ("gradient_min_transmission_20deg", 20.0 * np.pi / 180)):
-        t0 = time.perf_counter()
-        state = flap_state(points, mu)
-        prog = program(state, FLAP_VARS, np.array([DEFAULTS[k] for k in FLAP_VARS]))
-        res = minimize(state, x0, flap_state_bounds(), peak_scale=3000.0, prog=prog, maxiter=300)
-        wall = time.perf_counter() - t0
-        rows[label] = {"objective": float(res.value[res.best]), "wall_s": wall, "compile_s": prog.compile_s,
-                       "method": "scipy SLSQP on the epigraph statement (peak torque at every sample <= t, 2 equalities, "
-                                 f"transmission angle >= {np.degrees(mu):g} deg at every sample, box); exact Jacobians by one "
-                                 "jacfwd program through the implicit rule",
-                       "max_violation": float(res.violation[res.best]), "best_start": res.best,
-                       "design": res.best_params, "report": res.report()}
-        print(res.report(), flush=True)
-    # --- Nelder-Mead, as before (issue 5): smooth peak (T = 1 N m), h and z eliminated.
-    objective = flap_msd_objective(points)
-    value = jax.jit(lambda p: objective(p)[0])
-    value({k: float(v[0]) for k, v in free0.items()})  # compile before the clock starts
-    trace = []
-    t0 = time.perf_counter()
-
-    def traced(x):
-        f = float(value(dict(zip(FLAP_FREE, x))))
-        f = f if np.isfinite(f) else np.inf
-        trace.append((time.perf_counter() - t0, min(f, trace[-1][1]) if trace else f, x.copy()))
-        return f
-
-    nm_rows = []
-    bounds = flap_bounds()
-    for i in range(starts):
-        r = scipy_minimize(traced, [float(free0[k][i]) for k in FLAP_FREE], method="Nelder-Mead",
-                           bounds=[bounds[k] for k in FLAP_FREE], options={"xatol": 1e-10, "fatol": 1e-10, "maxfev": 4000})
-        nm_rows.append({"value": float(r.fun), "evaluations": int(r.nfev), "x": r.x.tolist()})
-    nm_total = time.perf_counter() - t0
-    final = min(f for _, f, _ in trace)
-    to_final = next(t for t, f, _ in trace if f <= final)
-    best_row = min(nm_rows, key=lambda r: r["value"])
-    free_best = dict(zip(FLAP_FREE, best_row["x"]))
-    hz = flap_eliminated(free_best)
-    nm_design = {**free_best, "h": float(hz["h"][0]), "z": float(hz["z"][0])}
-    # Nelder-Mead's design measured as the gradient statement measures (sampled maximum).
-    v, _, ok = prog.evaluate(np.array([nm_design[k] for k in FLAP_VARS]))
-    v = np.asarray(v)
-    sin_mu = np.sin(20.0 * np.pi / 180) - v[points + 2:]
-    rows["nelder_mead"] = {
-        "objective": final, "wall_s": to_final, "wall_s_all_starts": nm_total,
-        "objective_kind": "smooth peak (T = 1 N m, >= the sampled maximum by at most T log N = 4.6 N m)",
-        "sampled_peak_of_its_design": float(np.max(v[:points])) if bool(ok) else None,
-        "least_transmission_angle_deg_of_its_design": float(np.degrees(np.arcsin(np.min(sin_mu)))) if bool(ok) else None,
-        "design": nm_design, "rows": nm_rows,
-    }
-    g = rows["gradient"]
-    rows["ratio_nm_wall_to_gradient_wall"] = to_final / g["wall_s"]
-    rows["acceptance"] = {"objective_at_or_below_nm": g["objective"] <= final, "violation_le_1e-8": g["max_violation"] <= 1e-8,
-                          "ten_times_faster_compile_included": g["wall_s"] <= 0.1 * to_final}
-    print(f"flap: gradient {g['objective']:.4f} N m in {g['wall_s']:.2f} s ({g['compile_s']:.2f} s compile); "
-          f"Nelder-Mead {final:.4f} N m after {to_final:.2f} s", flush=True)
-    return rows
+    return run()
 
 
 def _pylinkage_fourbar():

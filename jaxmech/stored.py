@@ -220,12 +220,17 @@ def calls_lapack(compiled) -> bool:
 
 
 def _store(path: Path, compiled) -> None:
-    if calls_lapack(compiled):
-        return
     try:
+        # serialised before its text is read: once ``as_text`` had run, an executable with a
+        # sort (``lax.top_k``) was seen to fail to serialise ("`LessThan` is not
+        # serializable", jaxlib 0.10); with JAX's own cache on it fails either way, so the
+        # library's stored programs hold no sort (design.qp._largest)
+        data = pickle.dumps(serialize(compiled))
+        if calls_lapack(compiled):
+            return
         # zlib at level 1: a sixth of the size (a 3.3 MB scene program took 0.58 MB) for
         # 13 ms here and 8 ms when loaded
-        payload = zlib.compress(pickle.dumps(serialize(compiled)), 1)
+        payload = zlib.compress(data, 1)
         _write(path, hashlib.sha256(payload).digest() + payload)
         with _LOCK:
             _STATS["stored"] += 1

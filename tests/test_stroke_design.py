@@ -71,9 +71,16 @@ def test_the_adjoint_hessian_is_the_implicit_rules(problem):
 
 
 def test_every_start_converges_to_the_independent_optimum(problem):
+    from jaxmech import stored
+
     bounds = {"b": (2.5, 4.0), "c": (2.0, 3.5)}
     starts = {"b": np.array([3.0, 3.6, 2.8, 3.9]), "c": np.array([2.6, 3.2, 2.2, 2.1])}
+    before = stored.store_stats()
     res = minimize_second_order(problem, starts, bounds, peak_scale=1.0)
+    stored.wait_for_stores()
+    after = stored.store_stats()
+    if stored.store_dir() is not None:  # the program is stored (or was, by an earlier run)
+        assert after["stored"] + after["loaded"] == before["stored"] + before["loaded"] + 1
     assert np.all(res.status == Status.CONVERGED), res.report()
     assert np.all(res.kkt <= 1e-8) and np.all(res.violation <= 1e-10)
     ref = minimize(stroke_state(problem), {k: v[:1] for k, v in starts.items()}, bounds, method="SLSQP", maxiter=500, tol=1e-14)

@@ -134,6 +134,17 @@ def solve_qp(H, g, E, e, A, b, *, tol: float = 1e-10, ok_tol: float = 1e-9, max_
     return polish(H, g, E, e, A, b, ip, -(A @ d + b), scale, ok_tol)
 
 
+def _largest(x, k: int):
+    """``(values, indices)`` of the ``k`` largest entries of ``x (m,)``, largest first (ties
+    by index), by ranks and reductions: ``lax.top_k``'s sort made the executables that hold
+    it fail to serialise (jaxlib 0.10: "`LessThan` is not serializable"), so never stored."""
+    i = jnp.arange(x.shape[0])
+    ahead = (x[None, :] > x[:, None]) | ((x[None, :] == x[:, None]) & (i[None, :] < i[:, None]))
+    rank = jnp.sum(ahead, axis=1)
+    idx = jnp.argmax(rank[None, :] == jnp.arange(k)[:, None], axis=1)
+    return x[idx], idx
+
+
 def polish(H, g, E, e, A, b, ip: QPSolution, s, scale, ok_tol: float) -> QPSolution:
     """The interior point's answer made exact: the constraints it finds active (multiplier
     above slack), at most ``n`` of them, solved as equalities with the equalities
@@ -148,7 +159,7 @@ def polish(H, g, E, e, A, b, ip: QPSolution, s, scale, ok_tol: float) -> QPSolut
     if k == 0:
         return ip
     score = ip.z / jnp.maximum(ip.z + jnp.maximum(s, 0.0), 1e-300)
-    top, idx = jax.lax.top_k(score, k)
+    top, idx = _largest(score, k)
     on = top > 0.5
     a_s = A[idx] * on[:, None]
     dtype = H.dtype

@@ -217,7 +217,8 @@ def _solve_batch(problem, names: tuple, lo: tuple, hi: tuple, peak_scale: float,
 
 
 def minimize_second_order(problem: StrokeProblem | Callable, x0: Mapping, bounds: Mapping[str, tuple[float, float]], *,
-                          peak_scale: float = 1.0, options: SQPOptions = SQPOptions(), feas_tol: float = 1e-8) -> SecondOrderResult:
+                          peak_scale: float = 1.0, options: SQPOptions = SQPOptions(), feas_tol: float = 1e-8,
+                          reference: Mapping | None = None) -> SecondOrderResult:
     """Solve ``min max_i peak_i(x)  s.t.  eq(x) = 0, le(x) <= 0, bounds`` from every start
     at once, with exact second derivatives (module docstring).
 
@@ -225,7 +226,8 @@ def minimize_second_order(problem: StrokeProblem | Callable, x0: Mapping, bounds
     ``state({name: scalar}) -> Stated`` as for ``constrained.minimize``; `x0`
     ``{name: (S,)}`` starts; `bounds` ``{name: (low, high)}``; `peak_scale` a typical size
     of the peak; `options` the ``SQPOptions`` (``tol``: the scaled KKT residual that ends
-    a start); `feas_tol`: largest violation a winner may have.
+    a start); `feas_tol`: largest violation a winner may have; `reference` ``{name: value}``:
+    the design a start that does not assemble is moved towards (default: the first start).
 
     **Returns** a ``SecondOrderResult``: every start's design, peak, violation, status and
     KKT residual, the winner, and the local optima with how many starts reached each.
@@ -242,9 +244,10 @@ def minimize_second_order(problem: StrokeProblem | Callable, x0: Mapping, bounds
     width = hi - lo
     dtype = jnp.result_type(float)
     z0 = jnp.asarray(np.clip((starts - lo) / width, 0.0, 1.0), dtype)
+    ref = z0[0] if reference is None else jnp.asarray(np.clip([(float(reference[k]) - l) / w for k, l, w in zip(names, lo, width)], 0.0, 1.0), dtype)
     t0 = time.perf_counter()
     st, pulled = jax.block_until_ready(_solve_batch(problem, names, tuple(map(float, lo)), tuple(map(float, hi)), float(peak_scale),
-                                                    sizes, options, z0, z0[0]))
+                                                    sizes, options, z0, ref))
     return _result(st, pulled, sizes, lo, width, names, peak_scale, feas_tol, time.perf_counter() - t0)
 
 
