@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 
 from jaxmech.design.nlp import Status, cholesky_small, second_order  # noqa: E402
 from jaxmech.design.qp import solve_qp  # noqa: E402
-from jaxmech.design.sqp import sqp  # noqa: E402
+from jaxmech.design.sqp import queue, sqp  # noqa: E402
 
 
 def hs071(x):
@@ -122,3 +122,16 @@ def test_cholesky_without_lapack():
     np.testing.assert_allclose(np.asarray(L), np.linalg.cholesky(spd), rtol=1e-12, atol=1e-12)
     _, ok = cholesky_small(jnp.asarray(spd - 20 * np.eye(6)))
     assert not bool(ok)
+
+
+def test_a_queue_of_starts_on_fewer_lanes_gives_every_starts_answer():
+    """Five starts of HS071 on two lanes (each lane takes the next start when its own ends):
+    every start's answer, in the starts' order, as the starts solved side by side."""
+    evaluate, _ = second_order(hs071, 1)
+    starts = jnp.array([[1.0, 5.0, 5.0, 1.0], [2.0, 2.0, 2.0, 2.0], [4.5, 1.5, 3.0, 1.2], [1.2, 4.0, 4.2, 1.1], [3.0, 3.0, 3.0, 3.0]])
+    st, _ = jax.jit(jax.vmap(lambda x0: sqp(evaluate, x0, jnp.zeros(1), jnp.zeros(9))))(starts)
+    sq, _ = jax.jit(lambda x0: queue(evaluate, x0, jnp.zeros(1), jnp.zeros(9), 2))(starts)
+    assert np.all(np.asarray(sq.status) == Status.CONVERGED)
+    np.testing.assert_array_equal(np.asarray(sq.k), np.asarray(st.k))
+    np.testing.assert_allclose(np.asarray(sq.x), np.asarray(st.x), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(sq.x), np.broadcast_to(HS071_X, (5, 4)), atol=1e-8)

@@ -46,7 +46,7 @@ from ..newton import per_lane
 from .nlp import Evaluation, Status, cholesky_small, kkt_error
 from .qp import solve_qp
 
-__all__ = ["SQPOptions", "SQPState", "SQPLoop", "sqp", "modified_hessian", "merit"]
+__all__ = ["SQPOptions", "SQPState", "SQPLoop", "sqp", "queue", "iteration", "running", "modified_hessian", "merit"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -271,30 +271,79 @@ def step(lp: SQPLoop, j: _Judged, ev: Evaluation, ref, p: int, o: SQPOptions) ->
                    dphi=dphi, pred=pred, backtracks=backtracks)
 
 
+def iteration(evaluate, lp: SQPLoop, ref, p: int, o: SQPOptions, prepare=None) -> SQPLoop:
+    """One iteration of one start: evaluate the point ``lp.xt`` (one call site of the
+    problem), judge it (``judge``), and choose what to evaluate next (``step``)."""
+    ev = Evaluation(*evaluate(lp.xt, lp.yt, lp.zt))
+    j, ev = judge(lp, ev, p, o, prepare)
+    return step(lp, j, ev, ref, p, o)
+
+
+def running(lp: SQPLoop, o: SQPOptions):
+    """Whether a start still iterates (not done, iterations left)."""
+    return ~lp.st.done & (lp.st.k < o.max_iter)
+
+
 def sqp(evaluate, x0, y0, z0, options: SQPOptions = SQPOptions(), ref=None, prepare=None):
-    """Solve one start (vmap it for a batch).  `evaluate(x, y, z) -> Evaluation` as
-    ``nlp.second_order`` or ``stroke_problem`` give it; `x0` ``(n,)``; `y0` ``(p,)``,
-    `z0` ``(m,)`` the multipliers whose Lagrangian Hessian models the first step (for an
-    epigraph statement: ``1/N`` on each of its ``N`` peak rows, which the objective's
-    stationarity in ``t`` asks to sum to one).  A start that cannot be evaluated is moved
-    halfway towards `ref` (at most 20 times); one that evaluates goes through `prepare`
-    (``judge``).
+    """Solve one start (vmap it for a batch, or ``queue`` many).  `evaluate(x, y, z) ->
+    Evaluation` as ``nlp.second_order`` or ``stroke_problem`` give it; `x0` ``(n,)``; `y0`
+    ``(p,)``, `z0` ``(m,)`` the multipliers whose Lagrangian Hessian models the first step
+    (for an epigraph statement: ``1/N`` on each of its ``N`` peak rows, which the
+    objective's stationarity in ``t`` asks to sum to one).  A start that cannot be evaluated
+    is moved halfway towards `ref` (at most 20 times); one that evaluates goes through
+    `prepare` (``judge``).
 
     Returns ``(SQPState, pulled)``."""
-    o = options
     ref = x0 if ref is None else ref
     p = y0.shape[0]
-
-    def cond(lp: SQPLoop):
-        return ~lp.st.done & (lp.st.k < o.max_iter)
-
-    def body(lp: SQPLoop) -> SQPLoop:
-        ev = Evaluation(*evaluate(lp.xt, lp.yt, lp.zt))
-        j, ev = judge(lp, ev, p, o, prepare)
-        return step(lp, j, ev, ref, p, o)
-
     # every loop value depends on the start from the outset: under vmap the loop's body is
     # traced once, not once more per value found to be batched (see newton.per_lane)
     init = per_lane(initial_loop(x0, y0, z0, p, z0.shape[0]), jnp.all(jnp.isfinite(x0)))
-    out = jax.lax.while_loop(cond, body, init)
+    out = jax.lax.while_loop(lambda lp: running(lp, options), lambda lp: iteration(evaluate, lp, ref, p, options, prepare), init)
     return out.st, out.pulled
+
+
+class _Queue(NamedTuple):
+    lanes: SQPLoop  # (L, ...) the starts being solved
+    start: jax.Array  # (L,) which start each lane holds; S: idle
+    taken: jax.Array  # starts handed out so far
+    out: SQPState  # (S, ...) finished starts
+    pulled: jax.Array  # (S,)
+
+
+def queue(evaluate, x0, y0, z0, lanes: int, options: SQPOptions = SQPOptions(), ref=None, prepare=None):
+    """Solve ``S`` starts (``x0 (S, n)``; `y0`, `z0` one start's, as ``sqp``) on `lanes`
+    lanes of one vmapped loop: a lane whose start ends writes it out and takes the next
+    one.  A vmapped batch of ``sqp`` iterates every start as long as the slowest; here the
+    lanes stay busy, so the work is the starts' iterations added up (over `lanes`), plus
+    the last start's tail.  `ref` ``(n,)``: the reference for starts that do not evaluate
+    (default: the first start).  Returns ``(SQPState, pulled)`` with ``(S,)`` in front, in
+    the starts' order."""
+    o = options
+    S, L = x0.shape[0], min(lanes, x0.shape[0])
+    p = y0.shape[0]
+    ref = x0[0] if ref is None else ref
+
+    def fresh(i):
+        xi = x0[jnp.minimum(i, S - 1)]
+        return per_lane(initial_loop(xi, y0, z0, p, z0.shape[0]), jnp.all(jnp.isfinite(xi)))
+
+    init_lanes = jax.vmap(fresh)(jnp.arange(L))
+    one = jax.tree_util.tree_map(lambda a: a[0], init_lanes.st)
+    out = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (S,) + a.shape), one)
+    q0 = _Queue(init_lanes, jnp.arange(L), jnp.asarray(L), out, jnp.zeros((S,), jnp.int32))
+
+    def body(q: _Queue) -> _Queue:
+        lanes_ = jax.vmap(lambda lp: iteration(evaluate, lp, ref, p, o, prepare))(q.lanes)
+        ended = ~jax.vmap(lambda lp: running(lp, o))(lanes_) & (q.start < S)
+        slot = jnp.where(ended, q.start, S)  # S: written nowhere
+        out = jax.tree_util.tree_map(lambda a, v: a.at[slot].set(v, mode="drop"), q.out, lanes_.st)
+        pulled = q.pulled.at[slot].set(lanes_.pulled, mode="drop")
+        nxt = q.taken + jnp.cumsum(ended) - 1
+        start = jnp.where(ended, jnp.where(nxt < S, nxt, S), q.start)
+        new = jax.vmap(fresh)(start)
+        lanes_ = jax.tree_util.tree_map(lambda a, b: jnp.where(ended.reshape((L,) + (1,) * (a.ndim - 1)), a, b), new, lanes_)
+        return _Queue(lanes_, start, q.taken + jnp.sum(ended), out, pulled)
+
+    q = jax.lax.while_loop(lambda q: jnp.any(q.start < S), body, q0)
+    return q.out, q.pulled
