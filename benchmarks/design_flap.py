@@ -56,7 +56,7 @@ def child(spec: dict) -> dict:
     p0 = flap_starts(n, seed=spec.get("seed", 0))
     p0 = {**p0, **{k: np.full(n, DEFAULTS[k]) for k in FLAP_ELIMINATED}}
     prob = flap_stroke_problem(101, np.deg2rad(spec["limit_deg"]))
-    opts = SQPOptions(max_iter=spec.get("max_iter", 200))
+    opts = SQPOptions(**({"max_iter": spec["max_iter"]} if "max_iter" in spec else {}))
     out = {}
     doc = {k: DEFAULTS[k] for k in FLAP_VARS}  # the design a start that does not assemble moves towards
     for label, idx in spec.get("runs", {"all": list(range(n))}).items():
@@ -154,6 +154,7 @@ def bench_flap_problem() -> dict:
           f"warm {warm['all']['wall_s']:.2f} s; Nelder-Mead {nm['objective']:.6f} after {nm['wall_s']:.2f} s", flush=True)
     out["slsqp"] = slsqp(LIMIT_DEG)
     out["batch"] = bench_batch()
+    out["batch"]["speedup_per_start_vs_slsqp"] = out["slsqp"]["wall_s"] / STARTS / out["batch"]["per_start_s"]
     out["limits"] = bench_limits()
     return out
 

@@ -64,7 +64,7 @@ class SQPOptions:
 
     tol: float = 1e-8
     s_max: float = 100.0
-    max_iter: int = 200
+    max_iter: int = 500
     max_backtrack: int = 30
     eta: float = 1e-4
     active: float = 1e-6
