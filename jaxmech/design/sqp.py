@@ -1,5 +1,5 @@
 """Sequential quadratic programming with exact second derivatives, in JAX, one start per lane
-of a vmapped program.
+of a vmapped program (``queue``: more starts than lanes, each lane taking the next start).
 
 The problem, in scaled variables ``x`` (``n`` of them)::
 
@@ -20,10 +20,11 @@ convergence quadratic) and ``delta`` the smallest of a few shifts that lets ``B`
 factorised by Cholesky.
 
 The step is taken with a backtracking line search on the exact penalty
-``phi = f + nu (|h|_1 + |max(g, 0)|_1)`` (``nu`` above the multipliers' largest size), and a
-second-order correction when the full step is refused (the Maratos effect: a full step
-that the penalty refuses only because of the constraints' curvature is corrected by one
-more QP with the constraint values at the trial point).  **A trial design that cannot be
+``phi = f + nu (|h|_1 + |max(g, 0)|_1)`` (``nu`` above the multipliers' largest size), with
+up to ``max_soc`` second-order corrections when the full step is refused (the Maratos
+effect: a full step that the penalty refuses only because of the constraints' curvature is
+corrected by one more QP with the constraint values at the trial point), and a damping
+``lm I`` added to ``B`` that acts as a trust region's radius (``_damping``).  **A trial design that cannot be
 evaluated (a position that does not assemble) has an infinite penalty: the line search
 itself backs off** (no made-up violation reaches the model).
 
