@@ -41,7 +41,7 @@ import numpy as np
 
 from ..xla import jit
 
-__all__ = ["Stated", "Program", "ConstrainedResult", "ScaledProblem", "StartPoint", "StartOutcome", "StartsInBox", "starts_in_box", "program", "minimize", "FAIL_VIOLATION"]
+__all__ = ["Stated", "stated_rows", "Program", "ConstrainedResult", "ScaledProblem", "StartPoint", "StartOutcome", "StartsInBox", "starts_in_box", "program", "minimize", "FAIL_VIOLATION"]
 
 #: Scaled violation reported for every constraint at a design that cannot be assembled.
 FAIL_VIOLATION = 1e3
@@ -56,8 +56,9 @@ class Stated(NamedTuple):
     ok: jax.Array | bool = True
 
 
-def _flat(v, dtype):
-    return jnp.zeros((0,), dtype) if v is None else jnp.ravel(jnp.asarray(v, dtype))
+def stated_rows(s: Stated, dtype) -> tuple:
+    """``(peak, eq, le)`` of a ``Stated``, each a flat array of `dtype` (empty where absent)."""
+    return tuple(jnp.zeros((0,), dtype) if v is None else jnp.ravel(jnp.asarray(v, dtype)) for v in (s.peak, s.eq, s.le))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,7 +90,7 @@ def program(state: Callable, names, x_example) -> Program:
 
     def parts(x):
         s = state(dict(zip(names, x)))
-        return (_flat(s.peak, dtype), _flat(s.eq, dtype), _flat(s.le, dtype)), jnp.asarray(s.ok, bool)
+        return stated_rows(s, dtype), jnp.asarray(s.ok, bool)
 
     sizes = tuple(int(a.shape[0]) for a in jax.eval_shape(parts, x_example)[0])
 

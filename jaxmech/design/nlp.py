@@ -22,7 +22,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Status", "STATUS_MESSAGES", "Evaluation", "second_order", "cholesky_small", "kkt_error"]
+__all__ = ["Status", "STATUS_MESSAGES", "Evaluation", "RowDerivatives", "second_order", "weighted_derivatives", "cholesky_small", "kkt_error"]
 
 
 class Status(enum.IntEnum):
@@ -69,21 +69,37 @@ def second_order(problem: Callable, p: int):
         return jnp.concatenate([jnp.reshape(f, (1,)), h, g]), ok
 
     def evaluate(x, y, z):
-        w = jnp.concatenate([jnp.ones((1,), x.dtype), y, z])
-
-        def both(x_):
-            v, ok = values(x_)
-            grad_l = jax.grad(lambda x2: jnp.dot(w, values(x2)[0]))(x_)
-            return v, grad_l, ok
-
-        (v, grad_l, ok), lin = jax.linearize(lambda x_: both(x_), x)
-        tan_v, tan_g, _ = jax.vmap(lin)(jnp.eye(x.shape[0], dtype=x.dtype))
-        jac = tan_v.T  # (1 + p + m, n)
-        hess = 0.5 * (tan_g + tan_g.T)
-        ok = ok & jnp.all(jnp.isfinite(v)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
+        v, jac, hess, ok = weighted_derivatives(values, x, jnp.concatenate([jnp.ones((1,), x.dtype), y, z]))
         return Evaluation(v[0], v[1:], jac[0], jac[1:], hess, ok)
 
     return evaluate, values
+
+
+class RowDerivatives(NamedTuple):
+    """Rows of a problem at one point with their derivatives: `values` ``(k,)``, `jac`
+    ``(k, n)``, `hess` ``(n, n)`` the Hessian of ``w . values`` for the weights ``w`` asked
+    for (the Lagrange multipliers), and `ok` (evaluable, everything finite)."""
+
+    values: jax.Array
+    jac: jax.Array
+    hess: jax.Array
+    ok: jax.Array
+
+
+def weighted_derivatives(values: Callable, x, w) -> RowDerivatives:
+    """The ``RowDerivatives`` of ``values(x) -> (v (k,), ok)`` with weights ``w (k,)``, by
+    one linearisation of ``x -> (v, grad (w . v))`` (forward over reverse mode) with the
+    ``n`` unit tangents at once."""
+
+    def both(x_):
+        v, ok = values(x_)
+        return v, jax.grad(lambda x2: jnp.dot(w, values(x2)[0]))(x_), ok
+
+    (v, _, ok), lin = jax.linearize(both, x)
+    tan_v, tan_g, _ = jax.vmap(lin)(jnp.eye(x.shape[0], dtype=x.dtype))
+    jac, hess = tan_v.T, 0.5 * (tan_g + tan_g.T)
+    ok = ok & jnp.all(jnp.isfinite(v)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
+    return RowDerivatives(v, jac, hess, ok)
 
 
 def cholesky_small(a):

@@ -30,38 +30,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .constrained import starts_in_box
-from .nlp import STATUS_MESSAGES, Evaluation, Status
+from .constrained import starts_in_box, stated_rows
+from .nlp import STATUS_MESSAGES, Evaluation, Status, weighted_derivatives
 from ..xla import jit
 from .sqp import SQPOptions, queue
-from .stroke_problem import StrokeEvaluation, StrokeProblem, stroke_evaluator, stroke_sizes
+from .stroke_problem import StrokeProblem, stroke_evaluator, stroke_sizes
 
 __all__ = ["SecondOrderResult", "Epigraph", "state_evaluator", "epigraph_evaluator", "minimize_second_order", "local_optima"]
 
 
-def _flat(v, dtype):
-    return jnp.zeros((0,), dtype) if v is None else jnp.ravel(jnp.asarray(v, dtype))
-
-
 def state_evaluator(state: Callable, names: tuple):
-    """``evaluate(x, w) -> StrokeEvaluation`` for a generic ``state({name: scalar}) ->
+    """``evaluate(x, w) -> nlp.RowDerivatives`` for a generic ``state({name: scalar}) ->
     Stated``: the rows (peak, eq, le), their Jacobian (forward mode) and the Hessian of
     ``w . rows`` (forward over reverse mode), through whatever implicit rules `state` uses."""
 
     def rows(x):
         s = state(dict(zip(names, x)))
-        return jnp.concatenate([_flat(s.peak, x.dtype), _flat(s.eq, x.dtype), _flat(s.le, x.dtype)]), jnp.asarray(s.ok, bool)
+        return jnp.concatenate(stated_rows(s, x.dtype)), jnp.asarray(s.ok, bool)
 
     def evaluate(x, w):
-        def both(x_):
-            v, ok = rows(x_)
-            return v, jax.grad(lambda x2: jnp.dot(w, rows(x2)[0]))(x_), ok
-
-        (v, _, ok), lin = jax.linearize(both, x)
-        tan_v, tan_g, _ = jax.vmap(lin)(jnp.eye(x.shape[0], dtype=x.dtype))
-        jac, hess = tan_v.T, 0.5 * (tan_g + tan_g.T)
-        ok = ok & jnp.all(jnp.isfinite(v)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
-        return StrokeEvaluation(v, jac, hess, ok)
+        return weighted_derivatives(rows, x, w)
 
     return evaluate
 

@@ -47,9 +47,10 @@ from ..newton import newton
 from ..options import SolverOptions
 from ..status import Status
 from ..structure import blocks
-from .constrained import Stated
+from .constrained import Stated, stated_rows
+from .nlp import RowDerivatives
 
-__all__ = ["StrokeProblem", "StrokeEvaluation", "stroke_evaluator", "stroke_state"]
+__all__ = ["StrokeProblem", "stroke_evaluator", "stroke_state", "stroke_sizes"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -129,26 +130,10 @@ class StrokeProblem:
         return digest.hexdigest()
 
 
-class StrokeEvaluation(NamedTuple):
-    """One design's rows and derivatives (``stroke_evaluator``): `values` ``(k,)`` (peak,
-    eq, le stacked), `jac` ``(k, n)``, `hess` ``(n, n)`` the Hessian of ``w . values``,
-    `ok` (every sample converged, everything finite), and the `sizes` of peak, eq, le
-    (static)."""
-
-    values: jax.Array
-    jac: jax.Array
-    hess: jax.Array
-    ok: jax.Array
-
-
 class _Motion(NamedTuple):
     q: jax.Array  # (N, m)
     d1: jax.Array  # (N, m, dof)
     d2: jax.Array  # (N, m, dof, dof)
-
-
-def _flat(v, dtype):
-    return jnp.zeros((0,), dtype) if v is None else jnp.ravel(jnp.asarray(v, dtype))
 
 
 def _second(mech: Mechanism, q, d1, d2, u, p):
@@ -237,7 +222,7 @@ def _rows(problem: StrokeProblem, x, y: _Motion):
     """The stacked rows ``(peak, eq, le)`` of the design ``x (n,)`` on the motion ``y``."""
     p = problem.params(dict(zip(problem.names, x)))
     s = problem.rows(p, _motion(problem, y, x.dtype))
-    return jnp.concatenate([_flat(s.peak, x.dtype), _flat(s.eq, x.dtype), _flat(s.le, x.dtype)])
+    return jnp.concatenate(stated_rows(s, x.dtype))
 
 
 def stroke_sizes(problem: StrokeProblem, dtype=None) -> tuple:
@@ -249,14 +234,14 @@ def stroke_sizes(problem: StrokeProblem, dtype=None) -> tuple:
     def parts(x, y_):
         p = problem.params(dict(zip(problem.names, x)))
         s = problem.rows(p, _motion(problem, y_, dtype))
-        return tuple(_flat(a, dtype) for a in (s.peak, s.eq, s.le))
+        return stated_rows(s, dtype)
 
     out = jax.eval_shape(parts, jax.ShapeDtypeStruct((len(problem.names),), dtype), y)
     return tuple(int(a.shape[0]) for a in out)
 
 
 def stroke_evaluator(problem: StrokeProblem):
-    """``evaluate(x (n,), w (k,)) -> StrokeEvaluation``: the rows at the design `x`, their
+    """``evaluate(x (n,), w (k,)) -> RowDerivatives``: the rows at the design `x`, their
     Jacobian, and the Hessian of ``w . rows`` (``w``: one weight per row, e.g. the
     Lagrange multipliers), exact (module docstring).  Traceable and vmappable."""
     mech = problem.mechanism
@@ -291,7 +276,7 @@ def stroke_evaluator(problem: StrokeProblem):
         hess = hv[0] + sum(jnp.einsum("j...,l...->lj", a, b) for a, b in zip(jax.tree_util.tree_leaves(hv[1]), jax.tree_util.tree_leaves(dy)))
         hess = 0.5 * (hess + hess.T)
         ok = jnp.all(ok_i) & jnp.all(jnp.isfinite(values)) & jnp.all(jnp.isfinite(jac)) & jnp.all(jnp.isfinite(hess))
-        return StrokeEvaluation(values, jac, hess, ok)
+        return RowDerivatives(values, jac, hess, ok)
 
     return evaluate
 
