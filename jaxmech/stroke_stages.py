@@ -9,7 +9,9 @@ A stroke is cut into blocks of ``k`` points (``continuation``); one ``lax.scan``
 3. ``resolve_failures``: where any point failed, the robust kernel
    (``stroke_point.assemble``, several starts) re-solves the failed points, under one
    ``lax.cond`` per block;
-4. ``next_anchor``: the block's last point becomes the next anchor if it converged; a
+4. ``block_derivatives``: every point's implicit derivatives (or the last point's), once,
+   after the ``cond``: one copy of that program serves checked and re-solved points;
+5. ``next_anchor``: the block's last point becomes the next anchor if it converged; a
    failed one never does (gap handling: the last trusted pose is kept, its derivatives
    dropped, so the points after a gap restart from that pose itself).
 
@@ -36,7 +38,7 @@ from .status import Status
 from .stroke_point import assemble, checked_step, predict
 
 __all__ = [
-    "StrokeSetup", "StrokeCarry", "WalkState", "PointResults", "BlockResult", "BlockInput", "Derivatives",
+    "StrokeSetup", "StrokeCarry", "WalkState", "PointResults", "SolvedBlock", "BlockInput", "Derivatives",
     "block_guesses", "checked_block", "robust_block", "point_derivatives", "block_derivatives",
     "resolve_failures", "next_anchor", "track_walk", "restart_walk", "walk_block", "stroke_step",
 ]
@@ -104,13 +106,13 @@ class PointResults(NamedTuple):
     d2: jax.Array | None
 
 
-class BlockResult(NamedTuple):
-    """A solved block: its `points`, and the derivatives at its last point (`end_d1`,
-    `end_d2`, ``(D, m, dof[, dof])``: the next anchor's, zero where that point failed)."""
+class SolvedBlock(NamedTuple):
+    """A block's solved points before their derivatives: the `points` (``d1``, ``d2``
+    None) and the iterate their derivatives are taken at (`q_eval (D, k, m)`: the checked
+    step's, or the robust kernel's root)."""
 
     points: PointResults
-    end_d1: jax.Array
-    end_d2: jax.Array
+    q_eval: jax.Array
 
 
 class Derivatives(NamedTuple):
@@ -199,35 +201,29 @@ def block_derivatives(setup: StrokeSetup, q_eval, u_blk, good) -> Derivatives:
     return Derivatives(None, None, e1[:, 0], e2[:, 0])
 
 
-def select_block(keep, a: BlockResult, b: BlockResult) -> BlockResult:
-    """``a`` where ``keep (D, k)``, else ``b``; the end derivatives by the last point's flag."""
-
-    def pick(k_, x, y):
-        return None if x is None else where(k_.reshape(k_.shape + (1,) * (x.ndim - k_.ndim)), x, y)
-
-    points = PointResults(*(pick(keep, x, y) for x, y in zip(a.points, b.points)))
-    return BlockResult(points, pick(keep[:, -1], a.end_d1, b.end_d1), pick(keep[:, -1], a.end_d2, b.end_d2))
-
-
-def resolve_failures(setup: StrokeSetup, u_blk, guesses, q_anchor, block: BlockResult) -> BlockResult:
-    """The points the checked step did not accept, solved again by the robust kernel (with
-    derivatives at its roots).  Accepted points keep every value the checked step gave, so
-    a point's result never depends on which other designs share its block."""
+def resolve_failures(setup: StrokeSetup, u_blk, guesses, q_anchor, block: SolvedBlock) -> SolvedBlock:
+    """The points the checked step did not accept, solved again by the robust kernel.
+    Accepted points keep every value the checked step gave, so a point's result never
+    depends on which other designs share its block."""
     rob = robust_block(setup, u_blk, guesses, q_anchor)
-    d1, d2, e1, e2 = block_derivatives(setup, rob.q, u_blk, rob.status == Status.CONVERGED)
-    new = BlockResult(PointResults(rob.q, rob.status, rob.steps, rob.residual, rob.cond, rob.branch, d1, d2), e1, e2)
-    return select_block(block.points.status == Status.CONVERGED, block, new)
+    new = SolvedBlock(PointResults(rob.q, rob.status, rob.steps, rob.residual, rob.cond, rob.branch, None, None), rob.q)
+    keep = block.points.status == Status.CONVERGED
+
+    def pick(x, y):
+        return None if x is None else where(keep.reshape(keep.shape + (1,) * (x.ndim - keep.ndim)), x, y)
+
+    return jax.tree_util.tree_map(pick, block, new, is_leaf=lambda x: x is None)
 
 
-def next_anchor(carry: StrokeCarry, block: BlockResult, u_blk) -> StrokeCarry:
+def next_anchor(carry: StrokeCarry, points: PointResults, ders: Derivatives, u_blk) -> StrokeCarry:
     """The anchor for the next block.  A failed block end is never an anchor: the last
-    trusted pose is kept, and its derivatives dropped (``block.end_*`` are zero where the
+    trusted pose is kept, and its derivatives dropped (``ders.end_*`` are zero where the
     point failed), so the next block restarts from that pose instead of a series
     extrapolated across the gap."""
-    last_ok = block.points.status[:, -1] == Status.CONVERGED
-    q_next = where(last_ok[:, None], block.points.q[:, -1], carry.q_anchor)
+    last_ok = points.status[:, -1] == Status.CONVERGED
+    q_next = where(last_ok[:, None], points.q[:, -1], carry.q_anchor)
     u_next = where(last_ok[:, None], u_blk[..., -1, :], carry.u_anchor)
-    return StrokeCarry(q_next, block.end_d1, block.end_d2, u_next, carry.walk)
+    return StrokeCarry(q_next, ders.end_d1, ders.end_d2, u_next, carry.walk)
 
 
 def track_walk(walk: WalkState, points: PointResults, valid) -> WalkState:
@@ -255,17 +251,20 @@ def restart_walk(carry: StrokeCarry, guess, u_first) -> StrokeCarry:
 
 def walk_block(setup: StrokeSetup, carry: StrokeCarry, u_blk):
     """One block for every design: guesses, checked steps, the robust kernel where any
-    failed (one ``lax.cond``), the next anchor.  Returns ``(StrokeCarry, PointResults)``."""
+    failed (one ``lax.cond``), the derivatives, the next anchor.  Returns
+    ``(StrokeCarry, PointResults)``."""
     g = block_guesses(setup, carry, u_blk)
     chk = checked_block(setup, u_blk, g)
     status = where(chk.ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
-    # derivatives at the checked step's iterate share its sines and cosines
-    d1, d2, e1, e2 = block_derivatives(setup, chk.q_eval, u_blk, chk.ok)
     steps = jnp.ones(chk.ok.shape, jnp.int32)
-    block = BlockResult(PointResults(chk.q, status, steps, chk.residual, chk.cond, chk.branch, d1, d2), e1, e2)
+    block = SolvedBlock(PointResults(chk.q, status, steps, chk.residual, chk.cond, chk.branch, None, None), chk.q_eval)
     resolve = functools.partial(resolve_failures, setup, u_blk, g, carry.q_anchor)
     block = jax.lax.cond(jnp.any(~chk.ok), resolve, lambda b: b, block)
-    return next_anchor(carry, block, u_blk), block.points
+    # Once, after the cond: one copy of the derivative program serves both kinds of point
+    # (a copy in each branch was a third of the six-bar stroke's compile time).
+    ders = block_derivatives(setup, block.q_eval, u_blk, block.points.status == Status.CONVERGED)
+    points = block.points._replace(d1=ders.d1, d2=ders.d2)
+    return next_anchor(carry, points, ders, u_blk), points
 
 
 def empty_points(like: PointResults) -> PointResults:
