@@ -115,6 +115,7 @@ class NewtonState(NamedTuple):
     stalled: jax.Array
     guard: jax.Array  # whether steps that flip the branch indicator are refused
     crossed: jax.Array  # whether the guard refused a better step
+    on: jax.Array  # whether the best iterate is on the requested branch (False before the first)
 
 
 class NewtonProblem(NamedTuple):
@@ -179,7 +180,9 @@ def newton_iteration(pb: NewtonProblem, st: NewtonState) -> NewtonState:
     rt, jt = pb.evaluate(qt)
     rtn = small_norm(rt)
     better = jnp.isfinite(rtn) & ((rtn < st.rn) | (rtn <= pb.ftol))
-    on_b = pb.same_branch(qt, jt) | ~st.guard | ~pb.same_branch(st.q, st.js)
+    # A best iterate off the branch (the guess, before any is evaluated) moves freely.
+    on_t = pb.same_branch(qt, jt)
+    on_b = on_t | ~st.guard | ~st.on
     crossed = st.crossed | (better & ~on_b)
     accept = better & on_b
     q, r, rn, js = jax.tree_util.tree_map(lambda a, b: where(accept, a, b), (qt, rt, rtn, jt), (st.q, st.r, st.rn, st.js))
@@ -195,7 +198,7 @@ def newton_iteration(pb: NewtonProblem, st: NewtonState) -> NewtonState:
     dz, size = capped_step(pb.order, js, r, mu, pb.cap)
     converged = (size <= pb.xtol) & (rn <= pb.ftol)
     done = converged | stalled | ~jnp.isfinite(rn)
-    return NewtonState(st.k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled, st.guard & ~lift, crossed)
+    return NewtonState(st.k + 1, q, r, rn, js, dz, size, mu, slow, done, stalled, st.guard & ~lift, crossed, where(accept, on_t, st.on))
 
 
 def newton_status(pb: NewtonProblem, st: NewtonState, inputs_ok, cond_max):
@@ -268,12 +271,15 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     init = NewtonState(
         k=jnp.zeros((), jnp.int32), q=guess, r=jnp.zeros((m,), dtype), rn=jnp.asarray(jnp.inf, dtype), js=jnp.eye(m, dtype=dtype),
         dz=jnp.zeros((m,), dtype), size=zero, mu=zero, slow=jnp.zeros((), jnp.int32), done=~inputs_ok if skip is None else ~inputs_ok | skip,
-        stalled=jnp.asarray(False), guard=jnp.asarray(True), crossed=jnp.asarray(False),
+        stalled=jnp.asarray(False), guard=jnp.asarray(True), crossed=jnp.asarray(False), on=jnp.asarray(False),
     )
     st = jax.lax.while_loop(lambda st: (~st.done) & (st.k < opts.max_iterations + 1), functools.partial(newton_iteration, pb), per_lane(init, inputs_ok))
     q, status, cond = newton_status(pb, st, inputs_ok, cond_max)
     if branched:
-        branch = branch_value(mech, q, u, p)
+        # The blocks' determinants from the Jacobian of the last evaluated iterate (at most
+        # one xtol step from q: a sign that differs there is a singular pose): a Jacobian
+        # evaluated again at q was half of this kernel's program (six-bar: 663 of 1396 eqns).
+        branch = branch_value(mech, q, u, p, st.js)
         status = where((status == Status.CONVERGED) & ~on_branch(b_guess, branch), Status.BRANCH, status).astype(jnp.int32)
         flipped = where(status == Status.BRANCH, flipped_mask(b_guess, branch), 0)
     else:
