@@ -124,11 +124,15 @@ def static_token(x):
     there is none (a user's function, a mechanism that does not trace, a foreign pytree)."""
     from .mechanism import Mechanism  # here: mechanism imports jax programs of its own
 
-    if x is None or isinstance(x, (bool, int, float, str)):
+    if x is None or isinstance(x, (bool, int, float, complex, str)):  # complex: a load's direction
         return repr(x)
-    if isinstance(x, Mechanism) or hasattr(type(x), "program_key"):  # a mechanism, a scene
+    if isinstance(x, Mechanism) or hasattr(type(x), "program_key"):  # a mechanism, a scene, a model
         key = x.program_key
-        return None if key is None else f"{type(x).__name__}({key})"
+        if key is not None:
+            return f"{type(x).__name__}({key})"
+        if isinstance(x, Mechanism):
+            return None
+        # else a model without a key: determined by its parts where they are all ours (below)
     if isinstance(x, tuple):
         parts = [static_token(v) for v in x]
         return None if any(v is None for v in parts) else "(" + ",".join(parts) + ")"

@@ -279,3 +279,18 @@ def test_enable_default_cache_is_deprecated_and_respects_the_switch(monkeypatch)
     with pytest.warns(DeprecationWarning, match="enable_compile_cache"):
         enable_default_cache()
     assert dict(jax.config.values) == before
+
+
+def test_a_model_of_the_librarys_parts_has_a_store_key_and_one_with_a_callback_has_none():
+    """A ``Model`` without ``program_key`` is known by its parts: two equal ones in any
+    process have one key (its inverse-dynamics program is stored), a different gravity
+    direction (a complex number) another, and a load with a function of the user's none."""
+    from jaxmech.stored import static_token
+
+    def model(direction=-1j, loads=()):
+        return jm.Model(fourbar(), loads=(jm.Gravity(direction=direction),) + tuple(loads), params=("g",))
+
+    a, b = static_token(model()), static_token(model())
+    assert a is not None and a == b
+    assert static_token(model(direction=-1.0)) not in (None, a)
+    assert static_token(model(loads=(jm.Moment("theta3", lambda q, u, p: 1.0),))) is None

@@ -166,7 +166,9 @@ class Model:
       says which body it acts on (``body=``; ``Potential`` loads cannot be placed).
     - `program_key`: what identifies this model's compiled programs across processes (a
       ``Linkage`` sets it from its topology, so a new process loads them from the store);
-      None (the default) for a model of your own functions: nothing is stored for it.
+      None (the default): the model is known by its parts, so one made of the library's
+      bodies, loads and joints over a mechanism is stored too, and one holding a function
+      of your own (a load's callback) is not.
 
     A model's parameters (``parameters``) are the mechanism's, then its own, then its
     actuators', merged by name: one ``p`` mapping carries them all, and each function
