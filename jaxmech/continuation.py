@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -51,7 +52,7 @@ from .stroke_point import assemble, checked_step, predict
 from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step
 from .xla import jit, unfused
 
-__all__ = ["solve_stroke", "stroke", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
+__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -192,19 +193,32 @@ def merge_reverse(mech: Mechanism, fwd: PointResults, back: PointResults, need, 
     return merged._replace(q=merged.q + where(joined[..., None] & angle, 2 * jnp.pi * turns, 0.0))
 
 
-def attach(mech: Mechanism, setup: StrokeSetup, pts: PointResults, inputs_ok, u_out, p):
+class Walked(NamedTuple):
+    """What a stroke's walks found, before the implicit rule attaches it to ``(u, p)``: the
+    merged `points` (``PointResults``, ``(D, nb, ...)``), which of them have finite inputs
+    (`valid (D, nb)`) and the requested branch signs (`b0`, ``(D[, n_branches])``)."""
+
+    points: PointResults
+    valid: jax.Array
+    b0: jax.Array
+
+
+def attach(mech: Mechanism, walked: Walked, us, p):
     """``(Solution, d1, d2)``: statuses of non-finite inputs, branch flips, NaN where not
-    ``CONVERGED``, and the roots (and derivatives, None without) attached to ``(u, p)`` by
-    the implicit function theorem."""
-    status = where(inputs_ok, pts.status, Status.NONFINITE).astype(jnp.int32)
-    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(setup.b0, pts.branch) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
+    ``CONVERGED``, and the roots (and derivatives, None without) attached to ``(us, p)``
+    (the stroke as given: ``(nb, dof)`` shared or ``(D, nb, dof)``; ``p`` leaves ``(D,)``)
+    by the implicit function theorem."""
+    pts = walked.points
+    u_out = where(jnp.isfinite(us), us, 0.0)
+    status = where(walked.valid, pts.status, Status.NONFINITE).astype(jnp.int32)
+    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(walked.b0, pts.branch) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
     flipped = where(status == Status.BRANCH, flipped, 0)
     ok = status == Status.CONVERGED
     q_star = where(ok[..., None], pts.q, jnp.nan)
-    ax = setup.ax
+    ax = None if us.ndim == 2 else 0
     q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_positions(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, ax, 0))(q_star, ok, u_out, p)
     d1, d2 = pts.d1, pts.d2
-    if setup.derivs:
+    if d1 is not None:
         d1 = where(ok[..., None, None], d1, jnp.nan)
         d2 = where(ok[..., None, None, None], d2, jnp.nan)
         one = lambda *a: implicit_input_derivatives(mech, *a)  # noqa: E731
@@ -215,15 +229,12 @@ def attach(mech: Mechanism, setup: StrokeSetup, pts: PointResults, inputs_ok, u_
 
 
 # --------------------------------------------------------------------------- the stroke program
-@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
-def _stroke_program(mech, options, derivs, single, us, p, guess, n):
-    """Strokes of D designs: ``us (nb, dof)`` shared or ``(D, nb, dof)`` one per design
-    (bucketed: the first ``n`` points are the stroke), ``p`` leaves ``(D,)``, ``guess (D, m)``.
-
-    Returns ``(Solution, d1, d2)`` with ``(D, nb)`` in front (the design axis dropped with
-    ``single``; ``d1``, ``d2`` None without ``derivs``).  The forward walk and the reverse walk are one scan over the blocks of the
-    stroke and then of the reversed stroke (``stroke_stages.stroke_step``).
-    """
+def walk(mech, options, derivs, us, p, guess, n) -> Walked:
+    """Strokes of D designs walked, forward then in reverse where needed: ``us (nb, dof)``
+    shared or ``(D, nb, dof)`` one per design (bucketed: the first ``n`` points are the
+    stroke), ``p`` leaves ``(D,)``, ``guess (D, m)``.  The forward walk and the reverse walk
+    are one scan over the blocks of the stroke and then of the reversed stroke
+    (``stroke_stages.stroke_step``).  Values only: nothing here is differentiated."""
     setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
     d, nb = guess.shape[0], us.shape[-2]
     k = block_size(nb, options.anchors)
@@ -232,15 +243,35 @@ def _stroke_program(mech, options, derivs, single, us, p, guess, n):
     xs, us_r = walk_inputs(setup, us_s, valid, n, k, nblk)
     u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
     m, dof = mech.m, us.shape[-1]
-    walk = WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), g0)
-    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first, walk)
+    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first,
+                       WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), g0))  # fmt: skip
     u_first_r = jnp.broadcast_to(us_r[..., 0, :], (d, dof))
     step = functools.partial(stroke_step, setup, g0, u_first_r, empty_points(setup, g0, u_first, k))
     last, out = jax.lax.scan(step, init, xs)
     fwd = jax.tree_util.tree_map(lambda x: unblock(x[: nblk + 1], d, k, nb), out)
     back = jax.tree_util.tree_map(lambda x: unblock(x[nblk + 1 :], d, k, nb), out)
-    pts = merge_reverse(mech, fwd, back, last.walk.need, n, valid)
-    res = attach(mech, setup, pts, valid, us_s, p)
+    return Walked(merge_reverse(mech, fwd, back, last.walk.need, n, valid), valid, setup.b0)
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
+def _stroke_program(mech, options, derivs, single, us, p, guess, n):
+    """``walk`` then ``attach``: ``(Solution, d1, d2)`` with ``(D, nb)`` in front (the design
+    axis dropped with ``single``; ``d1``, ``d2`` None without ``derivs``)."""
+    res = attach(mech, walk(mech, options, derivs, us, p, guess, n), us, p)
+    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2), stored=True)
+def _walk_program(mech, options, derivs, us, p, guess, n) -> Walked:
+    """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
+    its inputs are then concrete once their gradients are stopped, so this program is the
+    stored one, and only ``attach`` (a small program) is traced by the autodiff."""
+    return walk(mech, options, derivs, us, p, guess, n)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _attach_program(mech, single, walked: Walked, us, p):
+    res = attach(mech, walked, us, p)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
@@ -275,7 +306,13 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
     # n traced: one program serves every length of a bucket
-    out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf, np.int32(n))
+    stopped = jax.tree_util.tree_map(jax.lax.stop_gradient, (us_, pf, gf))
+    if traced and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
+        # differentiated eagerly: the walk (values only) runs as the stored program, and
+        # the autodiff traces only the implicit rule's attachment
+        out = _attach_program(mech, single, _walk_program(mech, options, bool(derivs), *stopped, np.int32(n)), us_, pf)
+    else:
+        out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf, np.int32(n))
     if nb > n:
         axis = 0 if single else 1
         if traced:

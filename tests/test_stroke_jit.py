@@ -159,3 +159,44 @@ def test_newton_result_is_named():
     a, b, c, d = 1.0, 3.0, 2.5, 3.5
     joint = a * np.exp(0.5j) + b * np.exp(1j * float(res.q[0]))
     assert abs(joint - (d + c * np.exp(1j * float(res.q[1])))) < 1e-13
+
+
+def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_one():
+    """Under an eager ``jax.grad`` the stroke's walk runs as its own (stored) program on the
+    stopped inputs and only the implicit rule's attachment is traced: the values are the
+    one program's to the last bit, the gradient the jitted gradient's (to rounding: two
+    programs) and central differences' (on a stroke with a gap: NaN-free)."""
+    from jaxmech import continuation
+
+    mech = fourbar_mechanism
+    p0, u0, sign = FOURBARS[0]
+    us = u0 + np.linspace(0.0, 2 * np.pi, 61)
+    q_true, _ = fourbar_truth(us, p0, sign)
+    guess = jnp.asarray(q_true[0])
+    names = tuple(p0)
+
+    def figure(x):
+        p = dict(zip(names, x))
+        sol, d1, _ = jm.stroke_kinematics(mech, us, p, guess)
+        ok = sol.status == S.CONVERGED
+        return jnp.sum(jnp.where(ok, jnp.sin(sol.q[:, 1]) + d1[:, 0, 0], 0.0))
+
+    x0 = jnp.asarray([p0[k] for k in names])
+    calls = []
+    walk = continuation._walk_program
+    try:
+        continuation._walk_program = lambda *a: calls.append(1) or walk(*a)
+        eager = jax.grad(figure)(x0)
+    finally:
+        continuation._walk_program = walk
+    assert calls, "the eager gradient did not run the walk on its own"
+    jitted = jax.jit(jax.grad(figure))(x0)
+    assert np.all(np.isfinite(np.asarray(eager)))
+    np.testing.assert_allclose(np.asarray(eager), np.asarray(jitted), rtol=1e-12, atol=1e-12)
+    h = 1e-6
+    fd = [(figure(x0.at[i].add(h)) - figure(x0.at[i].add(-h))) / (2 * h) for i in range(len(names))]
+    np.testing.assert_allclose(np.asarray(eager), np.asarray(fd), rtol=1e-5, atol=1e-6)
+    # the values of the split route are the one program's, bit for bit
+    p_t = {k: jnp.asarray(v) for k, v in p0.items()}
+    primal, vjp = jax.vjp(lambda p: jm.solve_stroke(mech, us, p, guess).q, p_t)
+    assert np.array_equal(np.asarray(primal), np.asarray(jm.solve_stroke(mech, us, p0, guess).q), equal_nan=True)
