@@ -25,6 +25,13 @@ forward walk did not take its answer (``merge_reverse``).  It is part of the one
 program (the scan's second half, skipped block by block when no design needs it), so a
 stroke gives the same statuses and values eager and under a user's ``jax.jit``.
 
+Two programs: called with concrete arguments, a stroke first runs the straight-line
+program (each design's first root from its guess by plain Newton steps, then checked steps
+only, forward only: ``walk(..., robust=False)``), and the robust program (the re-solve and
+the reverse walk) only where some point failed it.  Where every point passes, both take the
+same steps and give the same bits, so a smooth stroke's first answer compiles only what it
+runs; a traced call (a user's ``jit``, ``vmap``) is always the robust program.
+
 Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
 a few sizes per octave, so 361 and 362 points share one compiled program.
 """
@@ -49,7 +56,7 @@ from .options import SolverOptions
 from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
 from .stroke_point import assemble, checked_step, predict
-from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step
+from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, first_anchor, stroke_step, walk_block
 from .xla import jit, unfused
 
 __all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
@@ -94,7 +101,7 @@ def unblock(x, d: int, k: int, nb: int):
 
 
 # --------------------------------------------------------------------------- the program's parts
-def stroke_setup(mech, options, derivs, us, p, guess):
+def stroke_setup(mech, options, derivs, us, p, guess, robust: bool = True):
     """``(StrokeSetup, us, guess)`` with non-finite inputs, parameters and guesses replaced
     once, here, by harmless values (their samples are flagged later): no derivative code
     ever sees a NaN that could leak into a batch gradient."""
@@ -113,7 +120,7 @@ def stroke_setup(mech, options, derivs, us, p, guess):
     else:
         b0 = jnp.zeros((d,), dtype)
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
-    return StrokeSetup(mech, options, bool(derivs), us.ndim == 2, ps, b0, scales), us_s, g0
+    return StrokeSetup(mech, options, bool(derivs), us.ndim == 2, ps, b0, scales, robust), us_s, g0
 
 
 def inputs_finite(us, p, guess):
@@ -190,7 +197,8 @@ def merge_reverse(mech: Mechanism, fwd: PointResults, back: PointResults, need, 
     joined = take & (r1 < n) & (at_r1[..., -1] > 0.5)
     angle = ~jnp.asarray(mech.coord_is_length())
     turns = jnp.round(at_r1[..., :-1] / (2 * jnp.pi))
-    return merged._replace(q=merged.q + where(joined[..., None] & angle, 2 * jnp.pi * turns, 0.0))
+    # a select, not "+ 0.0": an untouched angle keeps its bits (-0.0 too), as without the walk
+    return merged._replace(q=where(joined[..., None] & angle, merged.q + 2 * jnp.pi * turns, merged.q))
 
 
 class Walked(NamedTuple):
@@ -229,13 +237,18 @@ def attach(mech: Mechanism, walked: Walked, us, p):
 
 
 # --------------------------------------------------------------------------- the stroke program
-def walk(mech, options, derivs, us, p, guess, n) -> Walked:
+def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     """Strokes of D designs walked, forward then in reverse where needed: ``us (nb, dof)``
     shared or ``(D, nb, dof)`` one per design (bucketed: the first ``n`` points are the
     stroke), ``p`` leaves ``(D,)``, ``guess (D, m)``.  The forward walk and the reverse walk
     are one scan over the blocks of the stroke and then of the reversed stroke
-    (``stroke_stages.stroke_step``).  Values only: nothing here is differentiated."""
-    setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
+    (``stroke_stages.stroke_step``).  Values only: nothing here is differentiated.
+
+    ``robust=False``: the straight-line walk (checked steps only, forward only): a point
+    the checked step does not accept stays failed.  Where every point passes, the robust
+    walk takes the same steps (its re-solve and its reverse walk never run) and gives the
+    same bits."""
+    setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess, robust)
     d, nb = guess.shape[0], us.shape[-2]
     k = block_size(nb, options.anchors)
     nblk = -(-(nb - 1) // k) if nb > 1 else 0
@@ -243,8 +256,13 @@ def walk(mech, options, derivs, us, p, guess, n) -> Walked:
     xs, us_r = walk_inputs(setup, us_s, valid, n, k, nblk)
     u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
     m, dof = mech.m, us.shape[-1]
-    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first,
-                       WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), g0))  # fmt: skip
+    a0 = first_anchor(setup, g0, u_first)
+    init = StrokeCarry(a0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first,
+                       WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), a0))  # fmt: skip
+    if not robust:
+        forward = jax.tree_util.tree_map(lambda x: x[: nblk + 1], xs)
+        _, out = jax.lax.scan(lambda c, x: walk_block(setup, c, x.u), init, forward)
+        return Walked(jax.tree_util.tree_map(lambda x: unblock(x, d, k, nb), out), valid, setup.b0)
     u_first_r = jnp.broadcast_to(us_r[..., 0, :], (d, dof))
     step = functools.partial(stroke_step, setup, g0, u_first_r, empty_points(setup, g0, u_first, k))
     last, out = jax.lax.scan(step, init, xs)
@@ -253,26 +271,30 @@ def walk(mech, options, derivs, us, p, guess, n) -> Walked:
     return Walked(merge_reverse(mech, fwd, back, last.walk.need, n, valid), valid, setup.b0)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech.stored)
-def _stroke_program(mech, options, derivs, single, us, p, guess, n):
+@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4), stored=True)  # a new process loads it (jaxmech.stored)
+def _stroke_program(mech, options, derivs, single, robust, us, p, guess, n):
     """``walk`` then ``attach``: ``(Solution, d1, d2)`` with ``(D, nb)`` in front (the design
     axis dropped with ``single``; ``d1``, ``d2`` None without ``derivs``)."""
-    res = attach(mech, walk(mech, options, derivs, us, p, guess, n), us, p)
+    res = attach(mech, walk(mech, options, derivs, us, p, guess, n, robust), us, p)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2), stored=True)
-def _walk_program(mech, options, derivs, us, p, guess, n) -> Walked:
+@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)
+def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
     its inputs are then concrete once their gradients are stopped, so this program is the
     stored one, and only ``attach`` (a small program) is traced by the autodiff."""
-    return walk(mech, options, derivs, us, p, guess, n)
+    return walk(mech, options, derivs, us, p, guess, n, robust)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def _attach_program(mech, single, walked: Walked, us, p):
     res = attach(mech, walked, us, p)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
+
+
+def _all_converged(status) -> bool:
+    return bool(np.all(np.asarray(status) == Status.CONVERGED))
 
 
 def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False):
@@ -306,13 +328,24 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
     # n traced: one program serves every length of a bucket
+    # Concrete arguments run the straight-line program first (checked steps only: a third
+    # of the compile) and the robust one only where some point failed it: a smooth stroke's
+    # first answer compiles only what it runs, with the same bits.
+    derivs, n_ = bool(derivs), np.int32(n)
     stopped = jax.tree_util.tree_map(jax.lax.stop_gradient, (us_, pf, gf))
-    if traced and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
-        # differentiated eagerly: the walk (values only) runs as the stored program, and
-        # the autodiff traces only the implicit rule's attachment
-        out = _attach_program(mech, single, _walk_program(mech, options, bool(derivs), *stopped, np.int32(n)), us_, pf)
+    if not traced:
+        out = _stroke_program(mech, options, derivs, single, False, us_, pf, gf, n_)
+        if not _all_converged(out[0].status):
+            out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)
+    elif not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
+        # differentiated eagerly: the walk (values only) runs as a stored program, and the
+        # autodiff traces only the implicit rule's attachment
+        walked = _walk_program(mech, options, derivs, False, *stopped, n_)
+        if not _all_converged(where(walked.valid, walked.points.status, Status.NONFINITE)):
+            walked = _walk_program(mech, options, derivs, True, *stopped, n_)
+        out = _attach_program(mech, single, walked, us_, pf)
     else:
-        out = _stroke_program(mech, options, bool(derivs), single, us_, pf, gf, np.int32(n))
+        out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)
     if nb > n:
         axis = 0 if single else 1
         if traced:

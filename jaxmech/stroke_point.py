@@ -18,13 +18,13 @@ import numpy as np
 from .branches import branch_value, has_branch, on_branch
 from .linalg import cond1, small_max, small_norm, solve_blocks, where
 from .mechanism import Mechanism
-from .newton import NewtonResult, coord_scales, evaluator, newton, per_lane
+from .newton import NewtonResult, capped_step, coord_scales, evaluator, newton, per_lane
 from .options import SolverOptions, tolerances
 from .status import Status
 from .structure import blocks
 from .xla import unfused
 
-__all__ = ["predict", "checked_step", "CheckedStep", "assemble", "STARTS"]
+__all__ = ["predict", "checked_step", "CheckedStep", "first_root", "whole_turns", "assemble", "STARTS", "FIRST_STEPS", "CHECKED_STEPS"]
 
 
 # --------------------------------------------------------------------------- predictor
@@ -85,6 +85,7 @@ class CheckedStep(NamedTuple):
     - `q`: ``q_eval`` plus the next Newton step where ``ok`` (the reported root).
     - `ok`: every test passed (converged, conditioned, finite, on the branch).
     - `residual`, `cond`, `branch`: at ``q_eval``, as ``newton.NewtonResult``'s.
+    - `steps`: Newton steps taken (int32).
     """
 
     q_eval: jax.Array
@@ -93,6 +94,7 @@ class CheckedStep(NamedTuple):
     residual: jax.Array
     cond: jax.Array
     branch: jax.Array
+    steps: jax.Array
 
 
 def lean_xtol(opts: SolverOptions, dtype):
@@ -103,30 +105,87 @@ def lean_xtol(opts: SolverOptions, dtype):
     return min(tolerances(opts, dtype)[0], 1e4 * float(jnp.finfo(dtype).eps))
 
 
+#: Most plain Newton steps ``checked_step`` takes: one from a good prediction; a coarse
+#: stroke's (a four-bar at 2 degrees a point: 1e-5 off) needs two to pass the lean step test.
+CHECKED_STEPS = 3
+
+
 def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0) -> CheckedStep:
-    """One plain Newton step from a close (predicted) guess, then the convergence,
+    """Plain Newton steps from a close (predicted) guess (one, or up to ``CHECKED_STEPS``
+    while the next one is not yet within the lean step test), then the convergence,
     conditioning, finiteness and branch (``b0``: the requested signs) tests of
-    ``newton.newton``: straight-line code for the common case of a stroke point; the
-    points that fail it go to ``assemble``."""
+    ``newton.newton``: the common case of a stroke point; the points that fail it go to
+    ``assemble``."""
     dtype = guess.dtype
     _, ftol, cond_max = tolerances(opts, dtype)
+    xtol = lean_xtol(opts, dtype)
     evaluate, s = evaluator(mech, u, p, dtype)
-    r, js = evaluate(guess)
     order = blocks(mech)  # block-triangular solves (structure.py)
-    q = guess - solve_blocks(js, r, order) * s
-    finite_q = jnp.all(jnp.isfinite(q))
-    q = where(finite_q, q, jnp.zeros_like(q))
-    r, js = evaluate(q)
-    dz = solve_blocks(js, r, order)
+    r, js = evaluate(guess)
+
+    def more(c):
+        i, _, r_, _, dz_, finite_ = c
+        close = (small_max(jnp.abs(dz_)) <= xtol) & (small_norm(r_) <= ftol)
+        return (i < CHECKED_STEPS) & finite_ & ((i == 0) | ~close)
+
+    def step(c):
+        i, q_, _, _, dz_, _ = c
+        q_ = q_ - dz_ * s
+        finite_ = jnp.all(jnp.isfinite(q_))
+        q_ = where(finite_, q_, jnp.zeros_like(q_))
+        r_, js_ = evaluate(q_)
+        return i + 1, q_, r_, js_, solve_blocks(js_, r_, order), finite_
+
+    init = (jnp.zeros((), jnp.int32), guess, r, js, solve_blocks(js, r, order), jnp.asarray(True))
+    steps, q, r, js, dz, finite_q = jax.lax.while_loop(more, step, per_lane(init, jnp.all(jnp.isfinite(guess))))
     rn = small_norm(r)
     cond = cond1(js, order)
     br = branch_value(mech, q, u, p, js)
-    ok = (small_max(jnp.abs(dz)) <= lean_xtol(opts, dtype)) & (rn <= ftol) & (cond <= cond_max)
+    ok = (small_max(jnp.abs(dz)) <= xtol) & (rn <= ftol) & (cond <= cond_max)
     ok = ok & finite_q & jnp.all(jnp.isfinite(dz)) & on_branch(b0, br)
     qf = where(ok, q - dz * s, q)
     # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
     packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
-    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br)
+    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br, steps)
+
+
+# --------------------------------------------------------------------------- the first point
+#: Plain Newton steps from a stroke's guess at its first input (``first_root``).
+FIRST_STEPS = 8
+
+
+def whole_turns(mech: Mechanism, opts: SolverOptions, q, guess, u, p, ok, residual):
+    """``q`` with its angles moved by whole turns to lie within half a turn of ``guess``,
+    where ``ok`` and the equations do not notice (the scaled residual stays within
+    ``max(ftol, 2 residual)``): a stroke's angles are continuous as numbers."""
+    dtype = q.dtype
+    angle = ~jnp.asarray(mech.coord_is_length())
+    turns = where(angle, jnp.round((q - guess) / (2 * jnp.pi)), 0.0)
+    q_w = q - 2 * jnp.pi * turns
+    _, ftol, _ = tolerances(opts, dtype)
+    r_w = mech.residual(q_w, u, p) / mech.residual_scales(p, dtype)
+    return where(ok & (small_norm(r_w) <= jnp.maximum(ftol, 2 * residual)), q_w, q)
+
+
+def first_root(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
+    """The first point of a stroke from the user's guess: ``FIRST_STEPS`` plain Newton steps
+    (block by block, each capped at ``opts.max_step``, scaled), then ``checked_step``'s tests
+    (``b0``: the requested branch signs) and whole turns towards the guess.  Returns the
+    root where every test passed, else the guess itself (the robust kernel then assembles
+    the point): straight-line code, so a smooth stroke's program holds no fresh assembly."""
+    dtype = guess.dtype
+    evaluate, s = evaluator(mech, u, p, dtype)
+    order = blocks(mech)
+
+    def step(_, q):
+        r, js = evaluate(q)
+        dz, _ = capped_step(order, js, r, jnp.zeros((), dtype), jnp.asarray(opts.max_step, dtype))
+        q = q - dz * s
+        return where(jnp.all(jnp.isfinite(q)), q, guess)
+
+    q = jax.lax.fori_loop(0, FIRST_STEPS, step, guess)
+    chk = checked_step(mech, opts, u, p, q, b0)
+    return where(chk.ok, whole_turns(mech, opts, chk.q, guess, u, p, chk.ok, chk.residual), guess)
 
 
 # --------------------------------------------------------------------------- fresh assembly
@@ -195,10 +254,4 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inp
                         branch_value(mech, guess, u, p), jnp.zeros((), jnp.int32))
     init = per_lane((jnp.zeros((), jnp.int32), none, jnp.asarray(-1)), jnp.all(jnp.isfinite(guess)))
     _, best, _ = jax.lax.while_loop(wanted, attempt, init)
-    # Whole turns towards the guess, kept only if the equations do not notice them.
-    turns = where(angle, jnp.round((best.q - guess) / (2 * jnp.pi)), 0.0)
-    q_w = best.q - 2 * jnp.pi * turns
-    _, ftol, _ = tolerances(opts, dtype)
-    r_w = mech.residual(q_w, u, p) / mech.residual_scales(p, dtype)
-    q = where((best.status == Status.CONVERGED) & (small_norm(r_w) <= jnp.maximum(ftol, 2 * best.residual)), q_w, best.q)
-    return best._replace(q=q)
+    return best._replace(q=whole_turns(mech, opts, best.q, guess, u, p, best.status == Status.CONVERGED, best.residual))

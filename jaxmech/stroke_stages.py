@@ -35,11 +35,11 @@ from .linalg import where
 from .mechanism import Mechanism
 from .options import SolverOptions
 from .status import Status
-from .stroke_point import assemble, checked_step, predict
+from .stroke_point import assemble, checked_step, first_root, predict
 
 __all__ = [
     "StrokeSetup", "StrokeCarry", "WalkState", "PointResults", "SolvedBlock", "BlockInput", "Derivatives",
-    "block_guesses", "checked_block", "robust_block", "point_derivatives", "block_derivatives",
+    "first_anchor", "block_guesses", "checked_block", "robust_block", "point_derivatives", "block_derivatives",
     "resolve_failures", "next_anchor", "track_walk", "restart_walk", "walk_block", "stroke_step",
 ]
 
@@ -53,6 +53,9 @@ class StrokeSetup:
     - `p`: the designs' parameters, leaves ``(D,)``, finite (non-finite ones replaced).
     - `b0`: requested branch signs ``(D,)`` or ``(D, n_branches)``.
     - `scales`: coordinate scales ``(D, m)`` (``newton.coord_scales``).
+    - `robust` (static): points the checked step did not accept are re-solved by the robust
+      kernel; without, they stay failed (the straight-line program ``continuation`` tries
+      first: where every point passes, its values are the robust program's, bit for bit).
     """
 
     mech: Mechanism
@@ -62,6 +65,7 @@ class StrokeSetup:
     p: dict
     b0: jax.Array
     scales: jax.Array
+    robust: bool = True
 
     @property
     def ax(self):
@@ -181,6 +185,13 @@ def robust_block(setup: StrokeSetup, u_blk, guesses, q_anchor):
     return per_point(setup, one, u_blk, guesses, jnp.broadcast_to(q_anchor[:, None], guesses.shape))
 
 
+def first_anchor(setup: StrokeSetup, g0, u_first):
+    """Each design's first anchor ``(D, m)``: ``stroke_point.first_root`` from its guess
+    ``g0`` at the first input ``u_first (D, dof)`` (the guess itself where that fails)."""
+    one = lambda g_, u_, p_, b_: first_root(setup.mech, setup.options, u_, p_, g_, b_)  # noqa: E731
+    return jax.vmap(one)(g0, u_first, setup.p, setup.b0)
+
+
 # A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def point_derivatives(mech: Mechanism, shared: bool, q, u, p, ok):
@@ -256,10 +267,10 @@ def walk_block(setup: StrokeSetup, carry: StrokeCarry, u_blk):
     g = block_guesses(setup, carry, u_blk)
     chk = checked_block(setup, u_blk, g)
     status = where(chk.ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
-    steps = jnp.ones(chk.ok.shape, jnp.int32)
-    block = SolvedBlock(PointResults(chk.q, status, steps, chk.residual, chk.cond, chk.branch, None, None), chk.q_eval)
-    resolve = functools.partial(resolve_failures, setup, u_blk, g, carry.q_anchor)
-    block = jax.lax.cond(jnp.any(~chk.ok), resolve, lambda b: b, block)
+    block = SolvedBlock(PointResults(chk.q, status, chk.steps, chk.residual, chk.cond, chk.branch, None, None), chk.q_eval)
+    if setup.robust:
+        resolve = functools.partial(resolve_failures, setup, u_blk, g, carry.q_anchor)
+        block = jax.lax.cond(jnp.any(~chk.ok), resolve, lambda b: b, block)
     # Once, after the cond: one copy of the derivative program serves both kinds of point
     # (a copy in each branch was a third of the six-bar stroke's compile time).
     ders = block_derivatives(setup, block.q_eval, u_blk, block.points.status == Status.CONVERGED)

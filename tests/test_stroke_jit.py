@@ -9,6 +9,7 @@ on strokes with gaps, including one where the forward walk alone cannot reach so
 predictor is the stroke's, ``throw=True`` under a trace, the deprecated names.
 """
 
+import dataclasses
 import functools
 
 import jax
@@ -200,3 +201,39 @@ def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_
     p_t = {k: jnp.asarray(v) for k, v in p0.items()}
     primal, vjp = jax.vjp(lambda p: jm.solve_stroke(mech, us, p, guess).q, p_t)
     assert np.array_equal(np.asarray(primal), np.asarray(jm.solve_stroke(mech, us, p0, guess).q), equal_nan=True)
+
+
+def _six_bar_without_indicator():
+    return dataclasses.replace(SIXBAR, branch=None)  # every loop kept by its determinant
+
+
+@pytest.mark.parametrize("case", ["fourbar", "sixbar"])
+def test_a_smooth_stroke_runs_the_straight_line_program_with_the_robust_programs_bits(case):
+    """A concrete stroke runs the straight-line program (checked steps from a first root)
+    and the robust one only where a point failed it.  On a smooth stroke (every point
+    passes) both give the same bits, and so do the eager call and a user's ``jax.jit``
+    (which traces the robust program); the poses are the closed form's."""
+    from jaxmech import continuation
+
+    if case == "fourbar":
+        mech, p, signs = fourbar_mechanism, dict(a=1.0, b=3.0, c=2.5, d=3.5), 1.0
+        us = 0.3 + np.linspace(0.0, 2 * np.pi, 181)
+        q_true, _ = fourbar_truth(us, p, signs)
+    else:
+        mech = _six_bar_without_indicator()
+        p = dict(a=1.0, b=3.0, c=2.5, d=3.5, e=1.5, f=3.0, g=2.0, h=5.0, k=2.0, gamma=0.6)
+        us = 0.3 + np.linspace(0.0, 2 * np.pi, 181)
+        q_true, _ = sixbar_truth(us, p, (1.0, 1.0))
+    guess = np.asarray(q_true[0]) + 0.05  # a rough guess: the first root is solved from it
+    args = (mech, jm.SolverOptions(), True, True)
+    us_b = np.concatenate([us, np.repeat(us[-1:], continuation.bucket(us.size) - us.size)])[:, None]
+    rest = (us_b, {k: np.full((1,), v) for k, v in p.items()}, np.asarray(guess)[None], np.int32(us.size))
+    straight = continuation._stroke_program(*args, False, *rest)
+    robust = continuation._stroke_program(*args, True, *rest)
+    assert np.all(np.asarray(straight[0].status) == S.CONVERGED)
+    assert_bitwise_equal(straight[0], robust[0])
+    for a, b in zip(straight[1:], robust[1:]):
+        assert np.array_equal(np.asarray(a).view(np.uint8), np.asarray(b).view(np.uint8))
+    eager, jitted = eager_and_jit(mech, us, p, guess)
+    assert_bitwise_equal(eager, jitted)
+    np.testing.assert_allclose(np.asarray(eager.q), q_true, atol=ACCURACY)
