@@ -26,11 +26,15 @@ program (the scan's second half, skipped block by block when no design needs it)
 stroke gives the same statuses and values eager and under a user's ``jax.jit``.
 
 Two programs: called with concrete arguments, a stroke first runs the straight-line
-program (each design's first root from its guess by plain Newton steps, then checked steps
-only, forward only: ``walk(..., robust=False)``), and the robust program (the re-solve and
-the reverse walk) only where some point failed it.  Where every point passes, both take the
-same steps and give the same bits, so a smooth stroke's first answer compiles only what it
-runs; a traced call (a user's ``jit``, ``vmap``) is always the robust program.
+program (checked steps only, up to ``FRESH_STEPS`` plain Newton steps from each design's
+guess at its first point, forward only: ``walk(..., robust=False)``), and the robust
+program (the re-solve and the reverse walk) only where some point failed it: a design whose
+points all pass keeps the straight-line values, the others take the robust program's (so a
+design's answer never depends on the other designs of its batch).  Both programs take the
+same steps where every point passes, so a smooth stroke's first answer compiles only what
+it runs.  A traced call (a user's ``jit``, ``vmap``; a scene's stroke stage, so that a sweep
+and ``run_scene`` share one program) is the robust program; its values may differ from
+the straight-line program's in the last bit (two compiled programs).
 
 Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
 a few sizes per octave, so 361 and 362 points share one compiled program.
@@ -56,7 +60,7 @@ from .options import SolverOptions
 from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
 from .stroke_point import assemble, checked_step, predict
-from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, first_anchor, stroke_step, walk_block
+from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step, walk_block
 from .xla import jit, unfused
 
 __all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
@@ -170,6 +174,7 @@ def walk_inputs(setup: StrokeSetup, us_s, valid, n, k: int, nblk: int):
         valid=jnp.concatenate([valid_f, jnp.zeros_like(valid_f)]),
         reverse=jnp.asarray(flags),
         restart=jnp.asarray(np.arange(2 * (nblk + 1)) == nblk + 1),
+        fresh=jnp.asarray(np.isin(np.arange(2 * (nblk + 1)), (0, nblk + 1))),
     ), us_r
 
 
@@ -256,12 +261,11 @@ def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     xs, us_r = walk_inputs(setup, us_s, valid, n, k, nblk)
     u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
     m, dof = mech.m, us.shape[-1]
-    a0 = first_anchor(setup, g0, u_first)
-    init = StrokeCarry(a0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first,
-                       WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), a0))  # fmt: skip
+    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first,
+                       WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), g0))  # fmt: skip
     if not robust:
         forward = jax.tree_util.tree_map(lambda x: x[: nblk + 1], xs)
-        _, out = jax.lax.scan(lambda c, x: walk_block(setup, c, x.u), init, forward)
+        _, out = jax.lax.scan(functools.partial(walk_block, setup), init, forward)
         return Walked(jax.tree_util.tree_map(lambda x: unblock(x, d, k, nb), out), valid, setup.b0)
     u_first_r = jnp.broadcast_to(us_r[..., 0, :], (d, dof))
     step = functools.partial(stroke_step, setup, g0, u_first_r, empty_points(setup, g0, u_first, k))
@@ -293,14 +297,39 @@ def _attach_program(mech, single, walked: Walked, us, p):
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
-def _all_converged(status) -> bool:
-    return bool(np.all(np.asarray(status) == Status.CONVERGED))
+def _design_passed(status) -> np.ndarray:
+    """Per design (``()`` for one), whether every point of its stroke converged."""
+    return np.all(np.asarray(status) == Status.CONVERGED, axis=-1)
 
 
-def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False):
+def _per_design(passed: np.ndarray, straight, robust):
+    """``straight``'s values for the designs that ``passed``, ``robust``'s for the others
+    (host arrays, design axis first): a design's answer never depends on the others'."""
+    if passed.ndim == 0:
+        return straight if passed else robust
+
+    def pick(a, b):
+        a, b = np.asarray(a), np.asarray(b)
+        return jax.device_put(np.where(passed.reshape(passed.shape + (1,) * (a.ndim - 1)), a, b))
+
+    return jax.tree_util.tree_map(pick, straight, robust)
+
+
+def _straight_then_robust(run, status_of):
+    """``run(robust=False)``, and ``run(robust=True)`` for the designs where a point failed."""
+    straight = run(False)
+    passed = _design_passed(status_of(straight))
+    return straight if np.all(passed) else _per_design(passed, straight, run(True))
+
+
+def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False,
+           robust: bool | None = None):
     """Checks, broadcasting and shape bucketing shared by ``solve_stroke`` and
     ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``).
-    ``per_design``: ``us (D, N, dof)`` holds one stroke per design (``p`` leaves ``(D,)``)."""
+    ``per_design``: ``us (D, N, dof)`` holds one stroke per design (``p`` leaves ``(D,)``).
+    ``robust``: None picks the program (concrete arguments: the straight-line one, then the
+    robust one where a point failed it; traced: the robust one); True or False forces one
+    (False: a caller that checks the statuses and runs the robust one itself)."""
     us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
     if per_design:
         us_ = us_.reshape(np.shape(us))  # (D, N, dof) as given
@@ -333,16 +362,16 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     # first answer compiles only what it runs, with the same bits.
     derivs, n_ = bool(derivs), np.int32(n)
     stopped = jax.tree_util.tree_map(jax.lax.stop_gradient, (us_, pf, gf))
-    if not traced:
-        out = _stroke_program(mech, options, derivs, single, False, us_, pf, gf, n_)
-        if not _all_converged(out[0].status):
-            out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)
+    if robust is not None:
+        out = _stroke_program(mech, options, derivs, single, bool(robust), us_, pf, gf, n_)
+    elif not traced:
+        out = _straight_then_robust(lambda r: _stroke_program(mech, options, derivs, single, r, us_, pf, gf, n_),
+                                    lambda o: o[0].status)  # fmt: skip
     elif not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
         # differentiated eagerly: the walk (values only) runs as a stored program, and the
         # autodiff traces only the implicit rule's attachment
-        walked = _walk_program(mech, options, derivs, False, *stopped, n_)
-        if not _all_converged(where(walked.valid, walked.points.status, Status.NONFINITE)):
-            walked = _walk_program(mech, options, derivs, True, *stopped, n_)
+        walked = _straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
+                                       lambda w: np.where(np.asarray(w.valid), np.asarray(w.points.status), Status.NONFINITE))  # fmt: skip
         out = _attach_program(mech, single, walked, us_, pf)
     else:
         out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)

@@ -18,13 +18,13 @@ import numpy as np
 from .branches import branch_value, has_branch, on_branch
 from .linalg import cond1, small_max, small_norm, solve_blocks, where
 from .mechanism import Mechanism
-from .newton import NewtonResult, capped_step, coord_scales, evaluator, newton, per_lane
+from .newton import NewtonResult, coord_scales, evaluator, newton, per_lane
 from .options import SolverOptions, tolerances
 from .status import Status
 from .structure import blocks
 from .xla import unfused
 
-__all__ = ["predict", "checked_step", "CheckedStep", "first_root", "whole_turns", "assemble", "STARTS", "FIRST_STEPS", "CHECKED_STEPS"]
+__all__ = ["predict", "checked_step", "CheckedStep", "whole_turns", "assemble", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 
 
 # --------------------------------------------------------------------------- predictor
@@ -81,7 +81,7 @@ def predict(q, d1, d2, du, s, max_step):
 class CheckedStep(NamedTuple):
     """``checked_step``'s result for one sample.
 
-    - `q_eval`: the iterate the tests (and the derivatives) are evaluated at, always finite.
+    - `q_eval`: the iterate the tests are evaluated at, always finite.
     - `q`: ``q_eval`` plus the next Newton step where ``ok`` (the reported root).
     - `ok`: every test passed (converged, conditioned, finite, on the branch).
     - `residual`, `cond`, `branch`: at ``q_eval``, as ``newton.NewtonResult``'s.
@@ -98,39 +98,44 @@ class CheckedStep(NamedTuple):
 
 
 def lean_xtol(opts: SolverOptions, dtype):
-    """Step test of ``checked_step``.  Derivatives are taken at its iterate, one Newton step
-    ``dz`` from the reported root, and they move by ``|dz|`` times the curvature;
-    ``dz <= 1e4 eps`` keeps that below 1e-9 relative up to a condition number of ~1e3
-    (beyond which the robust kernel re-solves the point anyway)."""
+    """Step test of ``checked_step``: the reported root is the last iterate plus a step ``dz``
+    of at most ``1e4 eps`` (scaled), whose own error is of order ``|dz|^2`` (quadratic
+    convergence): round-off, up to a condition number of ~1e3 (beyond which the robust
+    kernel re-solves the point anyway).  The stroke's derivatives are taken at that root."""
     return min(tolerances(opts, dtype)[0], 1e4 * float(jnp.finfo(dtype).eps))
 
 
-#: Most plain Newton steps ``checked_step`` takes: one from a good prediction; a coarse
-#: stroke's (a four-bar at 2 degrees a point: 1e-5 off) needs two to pass the lean step test.
+#: Most plain Newton steps ``checked_step`` takes from a predicted guess: one from a good
+#: prediction; a coarse stroke's (a four-bar at 2 degrees a point: 1e-5 off) needs two to
+#: pass the lean step test.
 CHECKED_STEPS = 3
+#: ... and from a pose without a series (a stroke's guess at its first point, the reverse
+#: walk's start): capped at ``max_step`` (1 rad) each, so no whole turn is crossed.
+FRESH_STEPS = 6
 
 
-def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0) -> CheckedStep:
-    """Plain Newton steps from a close (predicted) guess (one, or up to ``CHECKED_STEPS``
-    while the next one is not yet within the lean step test), then the convergence,
-    conditioning, finiteness and branch (``b0``: the requested signs) tests of
-    ``newton.newton``: the common case of a stroke point; the points that fail it go to
-    ``assemble``."""
+def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHECKED_STEPS) -> CheckedStep:
+    """Plain Newton steps from a close (predicted) guess (one, or up to `most` (may be
+    traced) while the next one is not yet within the lean step test; each capped at
+    ``opts.max_step``, scaled), then the convergence, conditioning, finiteness and branch
+    (``b0``: the requested signs) tests of ``newton.newton``: the common case of a stroke
+    point; the points that fail it go to ``assemble``."""
     dtype = guess.dtype
     _, ftol, cond_max = tolerances(opts, dtype)
     xtol = lean_xtol(opts, dtype)
     evaluate, s = evaluator(mech, u, p, dtype)
     order = blocks(mech)  # block-triangular solves (structure.py)
     r, js = evaluate(guess)
+    tiny = float(jnp.finfo(dtype).tiny)
 
     def more(c):
         i, _, r_, _, dz_, finite_ = c
         close = (small_max(jnp.abs(dz_)) <= xtol) & (small_norm(r_) <= ftol)
-        return (i < CHECKED_STEPS) & finite_ & ((i == 0) | ~close)
+        return (i < most) & finite_ & ((i == 0) | ~close)
 
     def step(c):
         i, q_, _, _, dz_, _ = c
-        q_ = q_ - dz_ * s
+        q_ = q_ - dz_ * jnp.minimum(1.0, opts.max_step / jnp.maximum(small_max(jnp.abs(dz_)), tiny)) * s
         finite_ = jnp.all(jnp.isfinite(q_))
         q_ = where(finite_, q_, jnp.zeros_like(q_))
         r_, js_ = evaluate(q_)
@@ -149,11 +154,7 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0) -> Check
     return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br, steps)
 
 
-# --------------------------------------------------------------------------- the first point
-#: Plain Newton steps from a stroke's guess at its first input (``first_root``).
-FIRST_STEPS = 8
-
-
+# --------------------------------------------------------------------------- fresh assembly
 def whole_turns(mech: Mechanism, opts: SolverOptions, q, guess, u, p, ok, residual):
     """``q`` with its angles moved by whole turns to lie within half a turn of ``guess``,
     where ``ok`` and the equations do not notice (the scaled residual stays within
@@ -167,28 +168,6 @@ def whole_turns(mech: Mechanism, opts: SolverOptions, q, guess, u, p, ok, residu
     return where(ok & (small_norm(r_w) <= jnp.maximum(ftol, 2 * residual)), q_w, q)
 
 
-def first_root(mech: Mechanism, opts: SolverOptions, u, p, guess, b0):
-    """The first point of a stroke from the user's guess: ``FIRST_STEPS`` plain Newton steps
-    (block by block, each capped at ``opts.max_step``, scaled), then ``checked_step``'s tests
-    (``b0``: the requested branch signs) and whole turns towards the guess.  Returns the
-    root where every test passed, else the guess itself (the robust kernel then assembles
-    the point): straight-line code, so a smooth stroke's program holds no fresh assembly."""
-    dtype = guess.dtype
-    evaluate, s = evaluator(mech, u, p, dtype)
-    order = blocks(mech)
-
-    def step(_, q):
-        r, js = evaluate(q)
-        dz, _ = capped_step(order, js, r, jnp.zeros((), dtype), jnp.asarray(opts.max_step, dtype))
-        q = q - dz * s
-        return where(jnp.all(jnp.isfinite(q)), q, guess)
-
-    q = jax.lax.fori_loop(0, FIRST_STEPS, step, guess)
-    chk = checked_step(mech, opts, u, p, q, b0)
-    return where(chk.ok, whole_turns(mech, opts, chk.q, guess, u, p, chk.ok, chk.residual), guess)
-
-
-# --------------------------------------------------------------------------- fresh assembly
 #: Starts of ``assemble`` besides the guess: fixed offsets from the reference pose, in
 #: half-turns for angles and length scales for lengths (deterministic, so a stroke's result
 #: does not depend on anything but its inputs).  14: with 6, 1 in ~20 random six-bars

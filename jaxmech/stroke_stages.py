@@ -35,11 +35,11 @@ from .linalg import where
 from .mechanism import Mechanism
 from .options import SolverOptions
 from .status import Status
-from .stroke_point import assemble, checked_step, first_root, predict
+from .stroke_point import CHECKED_STEPS, FRESH_STEPS, assemble, checked_step, predict
 
 __all__ = [
-    "StrokeSetup", "StrokeCarry", "WalkState", "PointResults", "SolvedBlock", "BlockInput", "Derivatives",
-    "first_anchor", "block_guesses", "checked_block", "robust_block", "point_derivatives", "block_derivatives",
+    "StrokeSetup", "StrokeCarry", "WalkState", "PointResults", "BlockInput", "Derivatives",
+    "block_guesses", "checked_block", "robust_block", "point_derivatives", "block_derivatives",
     "resolve_failures", "next_anchor", "track_walk", "restart_walk", "walk_block", "stroke_step",
 ]
 
@@ -110,15 +110,6 @@ class PointResults(NamedTuple):
     d2: jax.Array | None
 
 
-class SolvedBlock(NamedTuple):
-    """A block's solved points before their derivatives: the `points` (``d1``, ``d2``
-    None) and the iterate their derivatives are taken at (`q_eval (D, k, m)`: the checked
-    step's, or the robust kernel's root)."""
-
-    points: PointResults
-    q_eval: jax.Array
-
-
 class Derivatives(NamedTuple):
     """``dq/du`` `d1` and ``d2q/du2`` `d2` at every point of a block (None when not wanted)
     and at its last point (`end_d1`, `end_d2`: the next anchor's)."""
@@ -132,12 +123,15 @@ class Derivatives(NamedTuple):
 class BlockInput(NamedTuple):
     """One scan step's inputs: the block's inputs `u` (``([D,] k, dof)``), which of its
     entries are points of the stroke with finite inputs (`valid (D, k)`), whether it
-    belongs to the reverse walk (`reverse`) and starts it (`restart`)."""
+    belongs to the reverse walk (`reverse`) and starts it (`restart`), and whether it starts
+    a walk (`fresh`: its anchor has no series, so its checked steps may take
+    ``FRESH_STEPS``)."""
 
     u: jax.Array
     valid: jax.Array
     reverse: jax.Array
     restart: jax.Array
+    fresh: jax.Array
 
 
 # --------------------------------------------------------------------------- mapping helpers
@@ -172,9 +166,11 @@ def block_guesses(setup: StrokeSetup, carry: StrokeCarry, u_blk):
     return jax.vmap(one, (0, 0, 0, 0, 0, setup.ax))(carry.q_anchor, carry.d1, carry.d2, carry.u_anchor, setup.scales, u_blk)
 
 
-def checked_block(setup: StrokeSetup, u_blk, guesses):
-    """``stroke_point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``."""
-    step = lambda u, p_, b_, g_: checked_step(setup.mech, setup.options, u, p_, g_, b_)  # noqa: E731
+def checked_block(setup: StrokeSetup, u_blk, guesses, fresh=False):
+    """``stroke_point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``
+    (``fresh``, may be traced: the block starts a walk, up to ``FRESH_STEPS`` each)."""
+    most = jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS)
+    step = lambda u, p_, b_, g_: checked_step(setup.mech, setup.options, u, p_, g_, b_, most)  # noqa: E731
     return per_block(setup, step, u_blk, guesses)
 
 
@@ -183,13 +179,6 @@ def robust_block(setup: StrokeSetup, u_blk, guesses, q_anchor):
     reference pose of its starts): a ``newton.NewtonResult`` of ``(D, k, ...)``."""
     one = lambda u, p_, b_, g_, ref: assemble(setup.mech, setup.options, u, p_, g_, ref, b_, inputs_finite=True)  # noqa: E731
     return per_point(setup, one, u_blk, guesses, jnp.broadcast_to(q_anchor[:, None], guesses.shape))
-
-
-def first_anchor(setup: StrokeSetup, g0, u_first):
-    """Each design's first anchor ``(D, m)``: ``stroke_point.first_root`` from its guess
-    ``g0`` at the first input ``u_first (D, dof)`` (the guess itself where that fails)."""
-    one = lambda g_, u_, p_, b_: first_root(setup.mech, setup.options, u_, p_, g_, b_)  # noqa: E731
-    return jax.vmap(one)(g0, u_first, setup.p, setup.b0)
 
 
 # A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
@@ -212,18 +201,19 @@ def block_derivatives(setup: StrokeSetup, q_eval, u_blk, good) -> Derivatives:
     return Derivatives(None, None, e1[:, 0], e2[:, 0])
 
 
-def resolve_failures(setup: StrokeSetup, u_blk, guesses, q_anchor, block: SolvedBlock) -> SolvedBlock:
-    """The points the checked step did not accept, solved again by the robust kernel.
-    Accepted points keep every value the checked step gave, so a point's result never
-    depends on which other designs share its block."""
+def resolve_failures(setup: StrokeSetup, u_blk, guesses, q_anchor, points: PointResults) -> PointResults:
+    """The points the checked step did not accept (``points``: its results, without
+    derivatives), solved again by the robust kernel.  Accepted points keep every value the
+    checked step gave, so a point's result never depends on which other designs share its
+    block."""
     rob = robust_block(setup, u_blk, guesses, q_anchor)
-    new = SolvedBlock(PointResults(rob.q, rob.status, rob.steps, rob.residual, rob.cond, rob.branch, None, None), rob.q)
-    keep = block.points.status == Status.CONVERGED
+    new = PointResults(rob.q, rob.status, rob.steps, rob.residual, rob.cond, rob.branch, None, None)
+    keep = points.status == Status.CONVERGED
 
     def pick(x, y):
         return None if x is None else where(keep.reshape(keep.shape + (1,) * (x.ndim - keep.ndim)), x, y)
 
-    return jax.tree_util.tree_map(pick, block, new, is_leaf=lambda x: x is None)
+    return jax.tree_util.tree_map(pick, points, new, is_leaf=lambda x: x is None)
 
 
 def next_anchor(carry: StrokeCarry, points: PointResults, ders: Derivatives, u_blk) -> StrokeCarry:
@@ -260,21 +250,23 @@ def restart_walk(carry: StrokeCarry, guess, u_first) -> StrokeCarry:
     return StrokeCarry(q0, jnp.zeros_like(carry.d1), jnp.zeros_like(carry.d2), u_first, carry.walk)
 
 
-def walk_block(setup: StrokeSetup, carry: StrokeCarry, u_blk):
+def walk_block(setup: StrokeSetup, carry: StrokeCarry, xs: BlockInput):
     """One block for every design: guesses, checked steps, the robust kernel where any
     failed (one ``lax.cond``), the derivatives, the next anchor.  Returns
     ``(StrokeCarry, PointResults)``."""
+    u_blk = xs.u
     g = block_guesses(setup, carry, u_blk)
-    chk = checked_block(setup, u_blk, g)
+    chk = checked_block(setup, u_blk, g, xs.fresh)
     status = where(chk.ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
-    block = SolvedBlock(PointResults(chk.q, status, chk.steps, chk.residual, chk.cond, chk.branch, None, None), chk.q_eval)
+    points = PointResults(chk.q, status, chk.steps, chk.residual, chk.cond, chk.branch, None, None)
     if setup.robust:
         resolve = functools.partial(resolve_failures, setup, u_blk, g, carry.q_anchor)
-        block = jax.lax.cond(jnp.any(~chk.ok), resolve, lambda b: b, block)
-    # Once, after the cond: one copy of the derivative program serves both kinds of point
-    # (a copy in each branch was a third of the six-bar stroke's compile time).
-    ders = block_derivatives(setup, block.q_eval, u_blk, block.points.status == Status.CONVERGED)
-    points = block.points._replace(d1=ders.d1, d2=ders.d2)
+        points = jax.lax.cond(jnp.any(~chk.ok), resolve, lambda b: b, points)
+    # Once, after the cond, at every reported root: one copy of the derivative program
+    # serves both kinds of point (a copy in each branch was a third of the six-bar stroke's
+    # compile time), and at the root itself, not one Newton step before it.
+    ders = block_derivatives(setup, points.q, u_blk, points.status == Status.CONVERGED)
+    points = points._replace(d1=ders.d1, d2=ders.d2)
     return next_anchor(carry, points, ders, u_blk), points
 
 
@@ -289,7 +281,7 @@ def stroke_step(setup: StrokeSetup, guess, u_first_reverse, empty: PointResults,
     ``restart_walk(carry, guess, u_first_reverse)``); a skipped block outputs ``empty``."""
     carry = jax.tree_util.tree_map(lambda a, b: where(xs.restart, a, b), restart_walk(carry, guess, u_first_reverse), carry)
     active = ~xs.reverse | jnp.any(carry.walk.need)
-    new, points = jax.lax.cond(active, functools.partial(walk_block, setup), lambda c, _: (c, empty), carry, xs.u)
+    new, points = jax.lax.cond(active, functools.partial(walk_block, setup), lambda c, _: (c, empty), carry, xs)
     walk = track_walk(carry.walk, points, xs.valid)
     walk = jax.tree_util.tree_map(lambda a, b: where(xs.reverse, a, b), carry.walk, walk)
     return new._replace(walk=walk), points
