@@ -119,7 +119,9 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
     traced) while the next one is not yet within the lean step test; each capped at
     ``opts.max_step``, scaled), then the convergence, conditioning, finiteness and branch
     (``b0``: the requested signs) tests of ``newton.newton``: the common case of a stroke
-    point; the points that fail it go to ``assemble``."""
+    point; the points that fail it go to ``assemble``.  ``most=1`` (a Python int): one
+    step in straight-line code, no loop (the robust stroke program's: a loop there cost 8%
+    more compile for the scenes, and its fallback solves the rest)."""
     dtype = guess.dtype
     _, ftol, cond_max = tolerances(opts, dtype)
     xtol = lean_xtol(opts, dtype)
@@ -142,7 +144,10 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
         return i + 1, q_, r_, js_, solve_blocks(js_, r_, order), finite_
 
     init = (jnp.zeros((), jnp.int32), guess, r, js, solve_blocks(js, r, order), jnp.asarray(True))
-    steps, q, r, js, dz, finite_q = jax.lax.while_loop(more, step, per_lane(init, jnp.all(jnp.isfinite(guess))))
+    if isinstance(most, int) and most == 1:  # straight-line code: the robust program's (it re-solves the rest)
+        steps, q, r, js, dz, finite_q = step(init)
+    else:
+        steps, q, r, js, dz, finite_q = jax.lax.while_loop(more, step, per_lane(init, jnp.all(jnp.isfinite(guess))))
     rn = small_norm(r)
     cond = cond1(js, order)
     br = branch_value(mech, q, u, p, js)

@@ -167,9 +167,11 @@ def block_guesses(setup: StrokeSetup, carry: StrokeCarry, u_blk):
 
 
 def checked_block(setup: StrokeSetup, u_blk, guesses, fresh=False):
-    """``stroke_point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``
-    (``fresh``, may be traced: the block starts a walk, up to ``FRESH_STEPS`` each)."""
-    most = jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS)
+    """``stroke_point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``.
+    The straight-line program takes up to ``CHECKED_STEPS`` Newton steps a point, or
+    ``FRESH_STEPS`` in a block that starts a walk (``fresh``, may be traced); the robust
+    program one (its fallback solves the points that need more)."""
+    most = 1 if setup.robust else jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS)
     step = lambda u, p_, b_, g_: checked_step(setup.mech, setup.options, u, p_, g_, b_, most)  # noqa: E731
     return per_block(setup, step, u_blk, guesses)
 
