@@ -86,6 +86,8 @@ class CheckedStep(NamedTuple):
     - `ok`: every test passed (converged, conditioned, finite, on the branch).
     - `residual`, `cond`, `branch`: at ``q_eval``, as ``newton.NewtonResult``'s.
     - `steps`: Newton steps taken (int32).
+    - `jac_guess`: the scaled Jacobian at the guess (what ``assemble`` reads the guess's
+      assembly modes from, without evaluating it again).
     """
 
     q_eval: jax.Array
@@ -95,6 +97,7 @@ class CheckedStep(NamedTuple):
     cond: jax.Array
     branch: jax.Array
     steps: jax.Array
+    jac_guess: jax.Array
 
 
 def lean_xtol(opts: SolverOptions, dtype):
@@ -156,7 +159,7 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
     qf = where(ok, q - dz * s, q)
     # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
     packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
-    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br, steps)
+    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br, steps, init[3])
 
 
 # --------------------------------------------------------------------------- fresh assembly
@@ -192,7 +195,7 @@ def score(status):
     return where(status == Status.CONVERGED, 2, where(status == Status.BRANCH, 1, 0))
 
 
-def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False) -> NewtonResult:
+def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False, jac_guess=None) -> NewtonResult:
     """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
     from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
 
@@ -211,12 +214,15 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inp
     continuous as numbers.
 
     ``inputs_finite``: as for ``newton`` (the stroke program sanitises its inputs once).
+    ``jac_guess``: the constraint Jacobian at the guess (any positive scaling), where the
+    caller has it (the checked step): the guess's block determinants are read from it.
     Returns the best start's ``newton.NewtonResult`` (``q`` moved by the whole turns).
     """
     dtype = guess.dtype
     s = coord_scales(mech, p, dtype)
     angle = ~jnp.asarray(mech.coord_is_length())
-    g0 = where(on_branch(target, branch_value(mech, guess, u, p)), guess, ref) if has_branch(mech) else guess
+    b_guess = branch_value(mech, guess, u, p, jac_guess)
+    g0 = where(on_branch(target, b_guess), guess, ref) if has_branch(mech) else guess
     table = ref[None] + jnp.asarray(start_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
     last = STARTS + 2
 
@@ -235,7 +241,7 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inp
 
     zero = jnp.zeros((), dtype)
     none = NewtonResult(guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
-                        branch_value(mech, guess, u, p), jnp.zeros((), jnp.int32))
+                        b_guess, jnp.zeros((), jnp.int32))
     init = per_lane((jnp.zeros((), jnp.int32), none, jnp.asarray(-1)), jnp.all(jnp.isfinite(guess)))
     _, best, _ = jax.lax.while_loop(wanted, attempt, init)
     return best._replace(q=whole_turns(mech, opts, best.q, guess, u, p, best.status == Status.CONVERGED, best.residual))

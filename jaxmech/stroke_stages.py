@@ -176,11 +176,12 @@ def checked_block(setup: StrokeSetup, u_blk, guesses, fresh=False):
     return per_block(setup, step, u_blk, guesses)
 
 
-def robust_block(setup: StrokeSetup, u_blk, guesses, q_anchor):
+def robust_block(setup: StrokeSetup, u_blk, guesses, q_anchor, jac_guess):
     """``stroke_point.assemble`` for every point of a block (``q_anchor (D, m)``: the
-    reference pose of its starts): a ``newton.NewtonResult`` of ``(D, k, ...)``."""
-    one = lambda u, p_, b_, g_, ref: assemble(setup.mech, setup.options, u, p_, g_, ref, b_, inputs_finite=True)  # noqa: E731
-    return per_point(setup, one, u_blk, guesses, jnp.broadcast_to(q_anchor[:, None], guesses.shape))
+    reference pose of its starts; ``jac_guess (D, k, m, m)``: the checked step's Jacobians
+    at the guesses): a ``newton.NewtonResult`` of ``(D, k, ...)``."""
+    one = lambda u, p_, b_, g_, ref, jg: assemble(setup.mech, setup.options, u, p_, g_, ref, b_, True, jg)  # noqa: E731
+    return per_point(setup, one, u_blk, guesses, jnp.broadcast_to(q_anchor[:, None], guesses.shape), jac_guess)
 
 
 # A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
@@ -203,12 +204,12 @@ def block_derivatives(setup: StrokeSetup, q_eval, u_blk, good) -> Derivatives:
     return Derivatives(None, None, e1[:, 0], e2[:, 0])
 
 
-def resolve_failures(setup: StrokeSetup, u_blk, guesses, q_anchor, points: PointResults) -> PointResults:
+def resolve_failures(setup: StrokeSetup, u_blk, guesses, q_anchor, jac_guess, points: PointResults) -> PointResults:
     """The points the checked step did not accept (``points``: its results, without
     derivatives), solved again by the robust kernel.  Accepted points keep every value the
     checked step gave, so a point's result never depends on which other designs share its
     block."""
-    rob = robust_block(setup, u_blk, guesses, q_anchor)
+    rob = robust_block(setup, u_blk, guesses, q_anchor, jac_guess)
     new = PointResults(rob.q, rob.status, rob.steps, rob.residual, rob.cond, rob.branch, None, None)
     keep = points.status == Status.CONVERGED
 
@@ -262,7 +263,7 @@ def walk_block(setup: StrokeSetup, carry: StrokeCarry, xs: BlockInput):
     status = where(chk.ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
     points = PointResults(chk.q, status, chk.steps, chk.residual, chk.cond, chk.branch, None, None)
     if setup.robust:
-        resolve = functools.partial(resolve_failures, setup, u_blk, g, carry.q_anchor)
+        resolve = functools.partial(resolve_failures, setup, u_blk, g, carry.q_anchor, chk.jac_guess)
         points = jax.lax.cond(jnp.any(~chk.ok), resolve, lambda b: b, points)
     # Once, after the cond, at every reported root: one copy of the derivative program
     # serves both kinds of point (a copy in each branch was a third of the six-bar stroke's
