@@ -46,8 +46,6 @@ from .kinematics import input_derivatives as input_derivatives
 from .kinematics import motion as motion
 from .kinematics import stroke_kinematics as stroke_kinematics
 from .kinematics import time_derivatives as time_derivatives
-from .linkage import Linkage as Linkage
-from .linkage import load_linkage as load_linkage
 from .mechanism import Mechanism as Mechanism
 from .mechanism import Vars as Vars
 from .mechanism import cis as cis
@@ -63,8 +61,19 @@ from .status import status_message as status_message
 from .cache import enable_compile_cache as enable_compile_cache
 
 
+#: Names whose modules load on first use (``jaxmech.linkage``: 15 ms of the import).
+_LAZY = {"Linkage": "linkage", "load_linkage": "linkage"}
+
+
 def __getattr__(name):
-    """Deprecated top-level names: ``jaxmech.implicit_root`` is ``jaxmech.implicit_positions``."""
+    """The lazily loaded names (``_LAZY``), and the deprecated ones: ``jaxmech.implicit_root``
+    is ``jaxmech.implicit_positions``."""
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
     if name == "implicit_root":
         import warnings
 
@@ -77,3 +86,7 @@ try:
     __version__ = _version("jaxmech")
 except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
