@@ -5,9 +5,9 @@ A stroke ``us (N, dof)`` is cut into blocks of ``k`` consecutive points.  A ``la
 walks the blocks in order (``stroke_stages.walk_block``); the last point of each solved
 block is the *anchor* of the next: its root ``q`` and the implicit derivatives ``dq/du``,
 ``d2q/du2`` there give every point of the next block a second-order predicted guess
-(``stroke_point.predict``), and one checked Newton step per point solves the whole block at
-once (vectorised over its points and over the designs); points that fail it are solved by
-the robust kernel (``stroke_point.assemble``).  A block whose guesses are good (a smooth
+(``stroke_point.predict``), and checked Newton steps solve the whole block at once
+(vectorised over its points and over the designs); points that fail them are solved by the
+robust kernel (``stroke_point.assemble``).  A block whose guesses are good (a smooth
 stroke) takes one Newton step per point.
 
 Gaps (stretches where the mechanism cannot be assembled): an anchor that failed is never

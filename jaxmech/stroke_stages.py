@@ -5,7 +5,9 @@ A stroke is cut into blocks of ``k`` points (``continuation``); one ``lax.scan``
 
 1. ``block_guesses``: each point's guess from the anchor (``StrokeCarry``) by the guarded
    predictor (``stroke_point.predict``);
-2. ``checked_block``: one checked Newton step per point (``stroke_point.checked_step``);
+2. ``checked_block``: checked Newton steps per point (``stroke_point.checked_step``: one
+   in the robust program, up to ``CHECKED_STEPS`` or ``FRESH_STEPS`` in the straight-line
+   one);
 3. ``resolve_failures``: where any point failed, the robust kernel
    (``stroke_point.assemble``, several starts) re-solves the failed points, under one
    ``lax.cond`` per block;
