@@ -113,7 +113,8 @@ def lean_xtol(opts: SolverOptions, dtype):
 #: pass the lean step test.
 CHECKED_STEPS = 3
 #: ... and from a pose without a series (a stroke's guess at its first point, the reverse
-#: walk's start): capped at ``max_step`` (1 rad) each, so no whole turn is crossed.
+#: walk's start).  Every step is capped at ``max_step`` and its angles are moved by whole
+#: turns to within half a turn of the guess (the convention of ``assemble``).
 FRESH_STEPS = 6
 
 
@@ -138,16 +139,21 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
         close = (small_max(jnp.abs(dz_)) <= xtol) & (small_norm(r_) <= ftol)
         return (i < most) & finite_ & ((i == 0) | ~close)
 
+    one = isinstance(most, int) and most == 1
+    angle = ~jnp.asarray(mech.coord_is_length())
+
     def step(c):
         i, q_, _, _, dz_, _ = c
         q_ = q_ - dz_ * jnp.minimum(1.0, opts.max_step / jnp.maximum(small_max(jnp.abs(dz_)), tiny)) * s
+        if not one:  # angles within half a turn of the guess (as assemble's); the tests see it
+            q_ = q_ - where(angle, 2 * jnp.pi * jnp.round((q_ - guess) / (2 * jnp.pi)), 0.0)
         finite_ = jnp.all(jnp.isfinite(q_))
         q_ = where(finite_, q_, jnp.zeros_like(q_))
         r_, js_ = evaluate(q_)
         return i + 1, q_, r_, js_, solve_blocks(js_, r_, order), finite_
 
     init = (jnp.zeros((), jnp.int32), guess, r, js, solve_blocks(js, r, order), jnp.asarray(True))
-    if isinstance(most, int) and most == 1:  # straight-line code: the robust program's (it re-solves the rest)
+    if one:  # straight-line code: the robust program's (it re-solves the rest)
         steps, q, r, js, dz, finite_q = step(init)
     else:
         steps, q, r, js, dz, finite_q = jax.lax.while_loop(more, step, per_lane(init, jnp.all(jnp.isfinite(guess))))
