@@ -32,9 +32,10 @@ program (the re-solve and the reverse walk) only where some point failed it: a d
 points all pass keeps the straight-line values, the others take the robust program's (so a
 design's answer never depends on the other designs of its batch).  Both programs take the
 same steps where every point passes, so a smooth stroke's first answer compiles only what
-it runs.  A traced call (a user's ``jit``, ``vmap``; a scene's stroke stage, so that a sweep
-and ``run_scene`` share one program) is the robust program; its values may differ from
-the straight-line program's in the last bit (two compiled programs).
+it runs.  ``run_scene`` and the sweep kernels follow the same rule per design
+(``straight_then_robust``), so a sweep and ``run_scene`` give the same bits.  A traced call
+(a user's ``jit``, ``vmap``) is the robust program; its values may differ from the
+straight-line program's in the last bit (two compiled programs).
 
 Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
 a few sizes per octave, so 361 and 362 points share one compiled program.
@@ -63,7 +64,7 @@ from .stroke_point import assemble, checked_step, predict
 from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step, walk_block
 from .xla import jit, unfused
 
-__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
+__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "all_converged", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -297,8 +298,8 @@ def _attach_program(mech, single, walked: Walked, us, p):
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
-def _design_passed(status) -> np.ndarray:
-    """Per design (``()`` for one), whether every point of its stroke converged."""
+def all_converged(status) -> np.ndarray:
+    """Per design (``()`` for one), whether every sample of ``status (..., N)`` converged."""
     return np.all(np.asarray(status) == Status.CONVERGED, axis=-1)
 
 
@@ -315,10 +316,14 @@ def _per_design(passed: np.ndarray, straight, robust):
     return jax.tree_util.tree_map(pick, straight, robust)
 
 
-def _straight_then_robust(run, status_of):
-    """``run(robust=False)``, and ``run(robust=True)`` for the designs where a point failed."""
+def straight_then_robust(run, passed_of):
+    """``run(False)`` (a straight-line program), then ``run(True)`` (the robust one) only if
+    some design did not pass (``passed_of(result)``: a bool per design, ``(D,)`` or ``()``):
+    each design keeps the first result where it passed and takes the second's elsewhere.
+    One rule for every concrete stroke: ``stroke``, ``scenes.evaluation.evaluate`` and the
+    sweep kernels, so a design's result is the same whichever of them computed it."""
     straight = run(False)
-    passed = _design_passed(status_of(straight))
+    passed = np.asarray(passed_of(straight))
     return straight if np.all(passed) else _per_design(passed, straight, run(True))
 
 
@@ -365,13 +370,13 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     if robust is not None:
         out = _stroke_program(mech, options, derivs, single, bool(robust), us_, pf, gf, n_)
     elif not traced:
-        out = _straight_then_robust(lambda r: _stroke_program(mech, options, derivs, single, r, us_, pf, gf, n_),
-                                    lambda o: o[0].status)  # fmt: skip
+        out = straight_then_robust(lambda r: _stroke_program(mech, options, derivs, single, r, us_, pf, gf, n_),
+                                   lambda o: all_converged(o[0].status))  # fmt: skip
     elif not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
         # differentiated eagerly: the walk (values only) runs as a stored program, and the
         # autodiff traces only the implicit rule's attachment
-        walked = _straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
-                                       lambda w: np.where(np.asarray(w.valid), np.asarray(w.points.status), Status.NONFINITE))  # fmt: skip
+        walked = straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
+                                      lambda w: all_converged(np.where(np.asarray(w.valid), np.asarray(w.points.status), Status.NONFINITE)))  # fmt: skip
         out = _attach_program(mech, single, walked, us_, pf)
     else:
         out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)

@@ -108,11 +108,12 @@ def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SCE
     return {k: v[0] for k, v in cols.items()}, status[0]
 
 
-def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, robust: bool = True):
     """The table columns of D designs (``p`` leaves ``(D,)``), traceable: ``({NAME[UNIT]:
     (D, N)}, status (D, N))``, unmasked (finite placeholders at failed samples), from
-    ``motion_and_outputs``: the sweep kernels' columns, and ``run_scene``'s."""
-    mo, values = motion_and_outputs(scene, points, options, scene.outputs is not None, p)
+    ``motion_and_outputs``: the sweep kernels' columns, and ``run_scene``'s.  ``robust``:
+    the stroke's robust program (the default) or its straight-line one."""
+    mo, values = motion_and_outputs(scene, points, options, scene.outputs is not None, p, robust)
     units = output_units(scene) if values else {}
     return table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}), mo.status
 

@@ -22,7 +22,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..continuation import stroke
+from ..continuation import all_converged, straight_then_robust, stroke
 from ..stored import cached_chain
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
@@ -48,7 +48,7 @@ def stroke_drive(scene, p, dtype):
     return ConstantSpeed(u0, w), (u1 - u0) / w
 
 
-def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
+def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, robust: bool | None = None):
     """Every design's ``Motion`` over its stroke, traceable (``jit``/``vmap``/``grad``).
 
     **Arguments**
@@ -61,9 +61,9 @@ def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     placeholders (the coordinates of ``scene.guess(p)``, zero derivatives), so that any
     function of the motion stays finite and differentiable; ``status`` says which samples are
     real.  The strokes of all designs are solved by one continuation (``per_design``
-    strokes), not one per design under ``vmap``.
+    strokes), not one per design under ``vmap``.  `robust`: as ``continuation.stroke``'s.
     """
-    return scene_kinematics(scene, points, p, scene_stroke(scene, points, p, options))
+    return scene_kinematics(scene, points, p, scene_stroke(scene, points, p, options, robust))
 
 
 def _as_dtype(scene, p):
@@ -85,10 +85,10 @@ class StrokePart(NamedTuple):
     d2q_du2: jax.Array
 
 
-def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS) -> StrokePart:
+def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, robust: bool | None = None) -> StrokePart:
     """The first half of ``scene_motion``: every design's drive, sample times, guess and
     stroke solution with its input derivatives, a ``StrokePart`` (``scene_kinematics``
-    takes it)."""
+    takes it).  `robust`: as ``continuation.stroke``'s."""
     mech = scene.mechanism
     p, dtype = _as_dtype(scene, p)
 
@@ -99,7 +99,7 @@ def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS) 
     drive, t, guess = jax.vmap(setup)(p)
     us = jax.vmap(lambda d, t1: jnp.reshape(jax.vmap(d)(t1), (points, mech.dof)))(drive, t)
     # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
-    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, per_design=True)
+    sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, per_design=True, robust=robust)
     return StrokePart(drive, t, guess, sol, e1, e2)
 
 
@@ -149,11 +149,12 @@ def scene_outputs(scene, p, mo: Motion) -> dict:
     return {k: (values[k], unit) for k, unit in units.items()}
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2))
-def stroke_stage(scene, points: int, options: SolverOptions, p):
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
+def stroke_stage(scene, points: int, options: SolverOptions, robust: bool, p):
     """``scene_stroke`` as a program of its own: the first of the two a scene's evaluation
-    runs (``motion_and_outputs``)."""
-    return scene_stroke(scene, points, p, options)
+    runs (``motion_and_outputs``); ``robust``: the stroke's robust program or its
+    straight-line one (``continuation.straight_then_robust`` runs them)."""
+    return scene_stroke(scene, points, p, options, robust)
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2))
@@ -166,13 +167,14 @@ def outputs_stage(scene, points: int, with_outputs: bool, p, part):
     return mo, {k: v for k, (v, _) in scene_outputs(scene, p, mo).items()}
 
 
-def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p):
+def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p, robust: bool = True):
     """``(motion, {output name: values (D, N)})`` of ``scene_motion`` and ``scene_outputs``
     (their units: ``outputs.output_units``); ``{}`` without outputs.  Two programs, the
     stroke (``stroke_stage``) and the rest (``outputs_stage``): ``evaluate`` compiles them
     at once on two threads, and the sweep kernels are the same two programs, so a design's
-    columns do not depend on the path.  Traceable: inside a trace the two are one program."""
-    return outputs_stage(scene, points, with_outputs, p, stroke_stage(scene, points, options, p))
+    columns do not depend on the path.  Traceable: inside a trace the two are one program.
+    ``robust``: the stroke's robust program (the default) or its straight-line one."""
+    return outputs_stage(scene, points, with_outputs, p, stroke_stage(scene, points, options, robust, p))
 
 
 def output_units(scene, points: int | None = None, options: SolverOptions | None = None, p=None) -> dict:
@@ -189,12 +191,20 @@ def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     (``stored.cached_chain``).  Outputs that do not trace (``scene.outputs`` converting values
     to numpy; ``outputs.run_outputs`` tells) are evaluated design by design on the host
     instead: ``outputs`` is then ``None`` and the caller evaluates them."""
-    first = (stroke_stage, (scene, int(points), options), (p,))
+    mode = {}
 
-    def run(traced: bool):
-        return cached_chain(*first, outputs_stage, (scene, int(points), traced), lambda part: (p, part)), traced
+    def attempt(robust: bool):
+        def run(traced: bool):
+            first = (stroke_stage, (scene, int(points), options, robust), (p,))
+            mode["traced"] = traced
+            return cached_chain(*first, outputs_stage, (scene, int(points), traced), lambda part: (p, part))
 
-    (mo, values), traced = run_outputs(scene, run)
+        return run_outputs(scene, run)
+
+    # the stroke's straight-line program, its robust one for the designs where a sample
+    # failed (the rule of every concrete stroke, the sweep kernels' too)
+    mo, values = straight_then_robust(attempt, lambda res: all_converged(res[0].status))
+    traced = mode["traced"]
     if not traced:
         return mo, None
     return mo, {k: (values[k], unit) for k, unit in scene_output_units(scene).items()}

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..continuation import all_converged, straight_then_robust
 from ..scenes.base import Scene
 from ..options import SolverOptions
 from ..status import Status
@@ -70,18 +71,19 @@ class ChunkData:
         return int(self.status.shape[0])
 
 
-def _chunk(scene: Scene, job: Job, p):
+def _chunk(scene: Scene, job: Job, p, robust: bool = True):
     """A chunk of designs (``p`` leaves ``(chunk,)``), as one traced function.  Trace mode:
     ``motion_and_outputs`` (the compiled kernel is its two programs, ``_TwoStage``, which
     ``run_scene`` runs: the columns are cut from them on the host, so a design's columns are
     ``run_scene``'s bit for bit; this fused form serves shape and outputs checks); figures
     mode: the figures ``(chunk,)`` and the status, reduced in the kernel; the motion alone
-    where outputs are per design."""
+    where outputs are per design.  ``robust``: the stroke's robust program or its
+    straight-line one (``_StraightFirst`` runs both as ``run_scene`` does)."""
     if job.outputs != "vmap":
-        return scene_motion(scene, job.points, p, job.options)[0]
+        return scene_motion(scene, job.points, p, job.options, robust)[0]
     if job.figures is None:
-        return motion_and_outputs(scene, job.points, job.options, scene.outputs is not None, p)
-    cols, status = batch_columns(scene, job.points, p, job.options)
+        return motion_and_outputs(scene, job.points, job.options, scene.outputs is not None, p, robust)
+    cols, status = batch_columns(scene, job.points, p, job.options, robust)
     figs = jax.vmap(lambda c, s, p1: stroke_figures(scene, job.figures, c, s, p1))(cols, status, p)
     status = figs.pop("status[-]")
     return figs, status
@@ -141,9 +143,9 @@ class _TwoStage:
     ``run_scene`` runs (so a design's columns are ``run_scene``'s bit for bit), compiled at
     once (the first on a thread of its own)."""
 
-    def __init__(self, scene: Scene, job: Job, spec: dict, sharding):
+    def __init__(self, scene: Scene, job: Job, spec: dict, sharding, robust: bool = True):
         with_outputs = scene.outputs is not None
-        first = jit(lambda p: stroke_stage(scene, job.points, job.options, p), in_shardings=(sharding,), out_shardings=sharding)
+        first = jit(lambda p: stroke_stage(scene, job.points, job.options, robust, p), in_shardings=(sharding,), out_shardings=sharding)
         lowered = first.lower(spec)
         # XLA releases the GIL while it compiles: the second program is traced meanwhile
         with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
@@ -168,6 +170,39 @@ class _TwoStage:
         )
 
 
+class _StraightFirst:
+    """A chunk kernel as ``run_scene`` runs a scene (``continuation.straight_then_robust``):
+    the program with the stroke's straight-line program, and the one with its robust
+    program, compiled the first time a design fails the first, for the designs that did.
+    Memory is the first program's (the chunk budget's estimate)."""
+
+    def __init__(self, build, passed_of):
+        self._build, self._passed_of = build, passed_of
+        self.straight, self._robust = build(False), None
+
+    def _run(self, p, robust: bool):
+        if not robust:
+            return self.straight(p)
+        if self._robust is None:
+            self._robust = self._build(True)
+        return self._robust(p)
+
+    def __call__(self, p):
+        return straight_then_robust(lambda robust: self._run(p, robust), self._passed_of)
+
+    def memory_analysis(self):
+        return self.straight.memory_analysis()
+
+
+def _passed(job: Job):
+    """Per design of a chunk kernel's output, whether its whole stroke converged."""
+    if job.outputs == "vmap" and job.figures is not None:
+        return lambda out: np.asarray(out[1]) == Status.CONVERGED  # the designs' statuses
+    if job.outputs == "vmap":
+        return lambda out: all_converged(out[0].status)
+    return lambda out: all_converged(out.status)
+
+
 def compiled_kernel(scene: Scene, job: Job, param_names):
     """AOT-compiled kernel for a chunk of ``job.chunk`` designs, sharded over local devices."""
     sharding = _mesh_sharding()
@@ -177,11 +212,14 @@ def compiled_kernel(scene: Scene, job: Job, param_names):
         return hit, sharding
     dtype = jnp.result_type(float)
     spec = {k: jax.ShapeDtypeStruct((job.chunk,), dtype, sharding=sharding) for k in param_names}
-    if job.outputs == "vmap" and job.figures is None:
-        compiled = _TwoStage(scene, job, spec, sharding)
-    else:
-        jitted = jit(lambda p: _chunk(scene, job, p), in_shardings=(sharding,), out_shardings=sharding)
-        compiled = jitted.lower(spec).compile()
+
+    def build(robust: bool):
+        if job.outputs == "vmap" and job.figures is None:
+            return _TwoStage(scene, job, spec, sharding, robust)
+        jitted = jit(lambda p: _chunk(scene, job, p, robust), in_shardings=(sharding,), out_shardings=sharding)
+        return jitted.lower(spec).compile()
+
+    compiled = _StraightFirst(build, _passed(job))
     if len(_COMPILED) > 32:
         _COMPILED.clear()
     _COMPILED[key] = compiled
