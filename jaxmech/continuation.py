@@ -45,14 +45,12 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .branches import branch_names, branch_value, flipped_mask, has_branch
-from .implicit import implicit_input_derivatives, implicit_positions
+from .branches import branch_value, has_branch
 from .inputs import batch_shape, prepare
 from .linalg import where
 from .mechanism import Mechanism
@@ -61,6 +59,7 @@ from .options import SolverOptions
 from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
 from .stroke_point import assemble, checked_step, predict
+from .stroke_attach import Walked, attach, eager_attach
 from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step, walk_block
 from .xla import jit, unfused
 
@@ -207,41 +206,6 @@ def merge_reverse(mech: Mechanism, fwd: PointResults, back: PointResults, need, 
     return merged._replace(q=where(joined[..., None] & angle, merged.q + 2 * jnp.pi * turns, merged.q))
 
 
-class Walked(NamedTuple):
-    """What a stroke's walks found, before the implicit rule attaches it to ``(u, p)``: the
-    merged `points` (``PointResults``, ``(D, nb, ...)``), which of them have finite inputs
-    (`valid (D, nb)`) and the requested branch signs (`b0`, ``(D[, n_branches])``)."""
-
-    points: PointResults
-    valid: jax.Array
-    b0: jax.Array
-
-
-def attach(mech: Mechanism, walked: Walked, us, p):
-    """``(Solution, d1, d2)``: statuses of non-finite inputs, branch flips, NaN where not
-    ``CONVERGED``, and the roots (and derivatives, None without) attached to ``(us, p)``
-    (the stroke as given: ``(nb, dof)`` shared or ``(D, nb, dof)``; ``p`` leaves ``(D,)``)
-    by the implicit function theorem."""
-    pts = walked.points
-    u_out = where(jnp.isfinite(us), us, 0.0)
-    status = where(walked.valid, pts.status, Status.NONFINITE).astype(jnp.int32)
-    flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(walked.b0, pts.branch) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
-    flipped = where(status == Status.BRANCH, flipped, 0)
-    ok = status == Status.CONVERGED
-    q_star = where(ok[..., None], pts.q, jnp.nan)
-    ax = None if us.ndim == 2 else 0
-    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_positions(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, ax, 0))(q_star, ok, u_out, p)
-    d1, d2 = pts.d1, pts.d2
-    if d1 is not None:
-        d1 = where(ok[..., None, None], d1, jnp.nan)
-        d2 = where(ok[..., None, None, None], d2, jnp.nan)
-        one = lambda *a: implicit_input_derivatives(mech, *a)  # noqa: E731
-        d1, d2 = jax.vmap(jax.vmap(one, (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, ax, 0))(d1, d2, q_star, ok, u_out, p)
-    sol = Solution(q=q, status=status, steps=pts.steps, residual=pts.residual, cond=pts.cond, branch=pts.branch,
-                   flipped=flipped, coords=mech.coords, branches=branch_names(mech))
-    return sol, d1, d2
-
-
 # --------------------------------------------------------------------------- the stroke program
 def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     """Strokes of D designs walked, forward then in reverse where needed: ``us (nb, dof)``
@@ -290,12 +254,6 @@ def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     its inputs are then concrete once their gradients are stopped, so this program is the
     stored one, and only ``attach`` (a small program) is traced by the autodiff."""
     return walk(mech, options, derivs, us, p, guess, n, robust)
-
-
-@functools.partial(jax.jit, static_argnums=(0, 1))
-def _attach_program(mech, single, walked: Walked, us, p):
-    res = attach(mech, walked, us, p)
-    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
 def all_converged(status) -> np.ndarray:
@@ -377,7 +335,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
         # autodiff traces only the implicit rule's attachment
         walked = straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
                                       lambda w: all_converged(np.where(np.asarray(w.valid), np.asarray(w.points.status), Status.NONFINITE)))  # fmt: skip
-        out = _attach_program(mech, single, walked, us_, pf)
+        out = eager_attach(mech, single, walked, us_, pf)
     else:
         out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)
     if nb > n:

@@ -167,9 +167,10 @@ def test_newton_result_is_named():
 
 def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_one():
     """Under an eager ``jax.grad`` the stroke's walk runs as its own (stored) program on the
-    stopped inputs and only the implicit rule's attachment is traced: the values are the
-    one program's to the last bit, the gradient the jitted gradient's (to rounding: two
-    programs) and central differences' (on a stroke with a gap: NaN-free)."""
+    stopped inputs, and the implicit rule's Jacobians come from another: the autodiff
+    traces only their contraction.  The values are the one program's to the last bit; the
+    gradient, a jvp and jacfwd are the jitted gradient's (to rounding: other programs) and
+    central differences' (on a stroke with a gap: NaN-free)."""
     from jaxmech import continuation
 
     mech = fourbar_mechanism
@@ -197,6 +198,11 @@ def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_
     jitted = jax.jit(jax.grad(figure))(x0)
     assert np.all(np.isfinite(np.asarray(eager)))
     np.testing.assert_allclose(np.asarray(eager), np.asarray(jitted), rtol=1e-12, atol=1e-12)
+    # forward mode takes the same eager route: jvp and jacfwd agree with the gradient
+    t = jnp.arange(1.0, len(names) + 1.0)
+    _, along = jax.jvp(figure, (x0,), (t,))
+    np.testing.assert_allclose(float(along), float(jnp.dot(jitted, t)), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(jax.jacfwd(figure)(x0)), np.asarray(jitted), rtol=1e-12, atol=1e-12)
     h = 1e-6
     fd = [(figure(x0.at[i].add(h)) - figure(x0.at[i].add(-h))) / (2 * h) for i in range(len(names))]
     np.testing.assert_allclose(np.asarray(eager), np.asarray(fd), rtol=1e-5, atol=1e-6)
