@@ -27,7 +27,10 @@ from .status import Status
 from .stroke_stages import PointResults
 from .xla import jit
 
-__all__ = ["Walked", "attach", "eager_attach"]
+__all__ = ["Walked", "attach", "eager_attach", "EAGER_JACOBIAN_MAX"]
+
+#: The most numbers ``eager_attach``'s stored Jacobians may hold (128 MiB in float64).
+EAGER_JACOBIAN_MAX = 1 << 24
 
 
 class Walked(NamedTuple):
@@ -135,7 +138,14 @@ def eager_attach(mech, single: bool, walked: Walked, us, p):
     """``attach`` of a concrete walk to a ``(us, p)`` an eager autodiff traces (``jax.grad``,
     ``jvp``, ``jacfwd`` outside any ``jit``): values and Jacobians come from stored programs
     (a new process loads them), and the autodiff traces only their contraction with the
-    tangents, a few products and sums."""
+    tangents, a few products and sums.  Where those Jacobians would be large (more than
+    ``EAGER_JACOBIAN_MAX`` numbers: many designs, points and parameters), the autodiff
+    traces ``attach`` itself instead, as inside a ``jit``."""
+    d, nb, m = walked.points.q.shape
+    dof = us.shape[-1]
+    per_point = m * (1 + dof + dof * dof if walked.points.d1 is not None else 1)
+    if d * nb * per_point * (dof + len(p)) > EAGER_JACOBIAN_MAX:
+        return _attach_program(mech, single, walked, us, p)
 
     @jax.custom_jvp
     def attached(us_, p_):

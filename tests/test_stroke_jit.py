@@ -292,3 +292,25 @@ def test_far_guesses_give_first_poses_within_half_a_turn_of_them():
         mine = np.sign(np.sin(guess[:, 1] - guess[:, 0])) == sign
         q_true, _ = fourbar_truth(us, p, sign)
         np.testing.assert_allclose(np.angle(np.exp(1j * (q[mine] - q_true))), 0.0, atol=ACCURACY)
+
+
+def test_an_eager_gradient_too_large_for_stored_jacobians_traces_attach_and_agrees(monkeypatch):
+    """Past ``EAGER_JACOBIAN_MAX`` the eager autodiff traces the implicit rule itself (no
+    dense Jacobians): the same gradient, to rounding."""
+    from jaxmech import stroke_attach
+
+    mech = fourbar_mechanism
+    p0 = dict(a=1.0, b=3.0, c=2.5, d=3.5)
+    us = 0.3 + np.linspace(0.0, 2 * np.pi, 61)
+    guess = jnp.asarray(fourbar_truth(us[:1], p0, 1.0)[0][0])
+
+    def figure(x):
+        sol, d1, _ = jm.stroke_kinematics(mech, us, dict(zip("abcd", x)), guess)
+        return jnp.sum(jnp.sin(sol.q[:, 1]) * d1[:, 0, 0])
+
+    x0 = jnp.asarray([p0[k] for k in "abcd"])
+    stored = jax.grad(figure)(x0)
+    monkeypatch.setattr(stroke_attach, "EAGER_JACOBIAN_MAX", 0)
+    traced = jax.grad(figure)(x0)
+    np.testing.assert_allclose(np.asarray(traced), np.asarray(stored), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(traced), np.asarray(jax.jit(jax.grad(figure))(x0)), rtol=1e-12, atol=1e-12)
