@@ -294,3 +294,45 @@ def test_a_model_of_the_librarys_parts_has_a_store_key_and_one_with_a_callback_h
     assert a is not None and a == b
     assert static_token(model(direction=-1.0)) not in (None, a)
     assert static_token(model(loads=(jm.Moment("theta3", lambda q, u, p: 1.0),))) is None
+
+
+def test_a_loaded_executable_that_cannot_run_is_compiled_anew_and_never_loaded_again(monkeypatch):
+    """A stored executable this runtime loads but cannot run (a kernel missing after
+    deserialisation, its error raised only when the result is waited for) is run through
+    the jit path instead, with the right answer; a tombstone then keeps the key from being
+    loaded or stored again."""
+    from jaxmech import stored
+
+    folder = stored.store_dir()
+    if folder is None:
+        import pytest
+
+        pytest.skip("the store is switched off in this environment")
+    k = float(np.random.default_rng().uniform(1.0, 2.0))  # static: a key of its own
+
+    def scaled_sum(k, a):  # the store keys a program by its function's name
+        return a * k + 1.0
+
+    fn = jax.jit(scaled_sum, static_argnums=0)
+    a = jnp.arange(3.0)
+
+    class Broken:
+        def block_until_ready(self):
+            raise RuntimeError("NOT_FOUND: Function iota.455_kernel not found")
+
+    loads = []
+
+    def fake_load(path):
+        loads.append(path)
+        return lambda *args: Broken()
+
+    monkeypatch.setattr(stored, "_load", fake_load)
+    np.testing.assert_allclose(np.asarray(stored.cached_call(fn, (k,), (a,))), np.arange(3.0) * k + 1.0)
+    assert len(loads) == 1
+    tombstones = list(folder.glob("*.unloadable"))
+    assert any(t.stem == loads[0].stem for t in tombstones)
+    stored._PROGRAMS.clear()  # as a new process: the tombstone, not the file, answers
+    np.testing.assert_allclose(np.asarray(stored.cached_call(fn, (k,), (a,))), np.arange(3.0) * k + 1.0)
+    assert len(loads) == 1
+    stored.wait_for_stores()
+    assert not loads[0].exists()  # and the freshly compiled program was not stored
