@@ -30,9 +30,8 @@ program (checked steps only, up to ``FRESH_STEPS`` plain Newton steps from each 
 guess at its first point, forward only: ``walk(..., robust=False)``), and the robust
 program (the re-solve and the reverse walk) only where some point failed it: a design whose
 points all pass keeps the straight-line values, the others take the robust program's (so a
-design's answer never depends on the other designs of its batch).  Both programs take the
-same steps where every point passes, so a smooth stroke's first answer compiles only what
-it runs.  ``run_scene`` and the sweep kernels follow the same rule per design
+design's answer never depends on the other designs of its batch).  A smooth stroke's first
+answer thus compiles only what it runs.  ``run_scene`` and the sweep kernels follow the same rule per design
 (``straight_then_robust``), so a sweep and ``run_scene`` give the same bits.  A traced call
 (a user's ``jit``, ``vmap``) is the robust program; its values may differ from the
 straight-line program's in the last bit (two compiled programs).
@@ -214,10 +213,10 @@ def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     are one scan over the blocks of the stroke and then of the reversed stroke
     (``stroke_stages.stroke_step``).  Values only: nothing here is differentiated.
 
-    ``robust=False``: the straight-line walk (checked steps only, forward only): a point
-    the checked step does not accept stays failed.  Where every point passes, the robust
-    walk takes the same steps (its re-solve and its reverse walk never run) and gives the
-    same bits."""
+    ``robust=False``: the straight-line walk (checked steps only, up to ``CHECKED_STEPS`` a
+    point and ``FRESH_STEPS`` from the guess, forward only): a point those do not bring to
+    the tests stays failed.  Where both walks converge they agree to rounding: the robust
+    walk takes one checked step a point and re-solves the rest, the first point included."""
     setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess, robust)
     d, nb = guess.shape[0], us.shape[-2]
     k = block_size(nb, options.anchors)
@@ -252,7 +251,7 @@ def _stroke_program(mech, options, derivs, single, robust, us, p, guess, n):
 def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
     its inputs are then concrete once their gradients are stopped, so this program is the
-    stored one, and only ``attach`` (a small program) is traced by the autodiff."""
+    stored one (``stroke_attach.eager_attach`` attaches its result)."""
     return walk(mech, options, derivs, us, p, guess, n, robust)
 
 
@@ -322,9 +321,9 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     # n traced: one program serves every length of a bucket
     # Concrete arguments run the straight-line program first (checked steps only: a third
     # of the compile) and the robust one only where some point failed it: a smooth stroke's
-    # first answer compiles only what it runs, with the same bits.
+    # first answer compiles only what it runs.
     derivs, n_ = bool(derivs), np.int32(n)
-    stopped = jax.tree_util.tree_map(jax.lax.stop_gradient, (us_, pf, gf))
+    stopped = jax.tree_util.tree_map(jax.lax.stop_gradient, (us_, pf, gf)) if traced and robust is None else None
     if robust is not None:
         out = _stroke_program(mech, options, derivs, single, bool(robust), us_, pf, gf, n_)
     elif not traced:
@@ -334,7 +333,7 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
         # differentiated eagerly: the walk (values only) runs as a stored program, and the
         # autodiff traces only the implicit rule's attachment
         walked = straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
-                                      lambda w: all_converged(np.where(np.asarray(w.valid), np.asarray(w.points.status), Status.NONFINITE)))  # fmt: skip
+                                      lambda w: np.all(np.asarray(w.converged), axis=-1))  # fmt: skip
         out = eager_attach(mech, single, walked, us_, pf)
     else:
         out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)

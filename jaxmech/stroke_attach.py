@@ -42,6 +42,11 @@ class Walked(NamedTuple):
     valid: jax.Array
     b0: jax.Array
 
+    @property
+    def converged(self):
+        """``(D, nb)``: the points with finite inputs solved on the requested branch."""
+        return self.valid & (self.points.status == Status.CONVERGED)
+
 
 def attach(mech: Mechanism, walked: Walked, us, p):
     """``(Solution, d1, d2)``: statuses of non-finite inputs, branch flips, NaN where not
@@ -82,7 +87,7 @@ def _attach_jacobians(mech, walked: Walked, us, p):
     {name: J_p (D, nb, *out)})``, by forward mode through ``attach``'s implicit rules (zero
     where a point failed).  What an eager derivative of a stroke contracts its tangents with."""
     pts = walked.points
-    ok = where(walked.valid, pts.status, Status.NONFINITE) == Status.CONVERGED
+    ok = walked.converged
     q_star = where(ok[..., None], pts.q, jnp.nan)
     u_out = where(jnp.isfinite(us), us, 0.0)
     derivs = pts.d1 is not None
@@ -157,7 +162,7 @@ def eager_attach(mech, single: bool, walked: Walked, us, p):
         t_us, t_p = tangents
         out = _attach_program(mech, single, walked, us_, p_)
         jac = _attach_jacobians(mech, walked, us_, p_)
-        ok = np.asarray(walked.valid) & (np.asarray(walked.points.status) == Status.CONVERGED)
+        ok = np.asarray(walked.converged)
         t_out = _tangents(single, jac, ok, us_, t_us, t_p)
         sol, d1, d2 = out
         t_sol = dataclasses.replace(jax.tree_util.tree_map(_zero_tangent, sol), q=t_out[0])

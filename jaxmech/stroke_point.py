@@ -24,7 +24,7 @@ from .status import Status
 from .structure import blocks
 from .xla import unfused
 
-__all__ = ["predict", "checked_step", "CheckedStep", "whole_turns", "assemble", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
+__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "assemble", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 
 
 # --------------------------------------------------------------------------- predictor
@@ -140,13 +140,12 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
         return (i < most) & finite_ & ((i == 0) | ~close)
 
     one = isinstance(most, int) and most == 1
-    angle = ~jnp.asarray(mech.coord_is_length())
 
     def step(c):
         i, q_, _, _, dz_, _ = c
         q_ = q_ - dz_ * jnp.minimum(1.0, opts.max_step / jnp.maximum(small_max(jnp.abs(dz_)), tiny)) * s
         if not one:  # angles within half a turn of the guess (as assemble's); the tests see it
-            q_ = q_ - where(angle, 2 * jnp.pi * jnp.round((q_ - guess) / (2 * jnp.pi)), 0.0)
+            q_ = towards(mech, q_, guess)
         finite_ = jnp.all(jnp.isfinite(q_))
         q_ = where(finite_, q_, jnp.zeros_like(q_))
         r_, js_ = evaluate(q_)
@@ -169,14 +168,18 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
 
 
 # --------------------------------------------------------------------------- fresh assembly
-def whole_turns(mech: Mechanism, opts: SolverOptions, q, guess, u, p, ok, residual):
-    """``q`` with its angles moved by whole turns to lie within half a turn of ``guess``,
-    where ``ok`` and the equations do not notice (the scaled residual stays within
-    ``max(ftol, 2 residual)``): a stroke's angles are continuous as numbers."""
-    dtype = q.dtype
+def towards(mech: Mechanism, q, guess):
+    """``q`` with its angles moved by whole turns to within half a turn of ``guess``."""
     angle = ~jnp.asarray(mech.coord_is_length())
-    turns = where(angle, jnp.round((q - guess) / (2 * jnp.pi)), 0.0)
-    q_w = q - 2 * jnp.pi * turns
+    return q - where(angle, 2 * jnp.pi * jnp.round((q - guess) / (2 * jnp.pi)), 0.0)
+
+
+def whole_turns(mech: Mechanism, opts: SolverOptions, q, guess, u, p, ok, residual):
+    """``towards(q, guess)`` where ``ok`` and the equations do not notice the turns (the
+    scaled residual stays within ``max(ftol, 2 residual)``), else ``q``: a stroke's angles
+    are continuous as numbers."""
+    dtype = q.dtype
+    q_w = towards(mech, q, guess)
     _, ftol, _ = tolerances(opts, dtype)
     r_w = mech.residual(q_w, u, p) / mech.residual_scales(p, dtype)
     return where(ok & (small_norm(r_w) <= jnp.maximum(ftol, 2 * residual)), q_w, q)

@@ -55,9 +55,10 @@ class StrokeSetup:
     - `p`: the designs' parameters, leaves ``(D,)``, finite (non-finite ones replaced).
     - `b0`: requested branch signs ``(D,)`` or ``(D, n_branches)``.
     - `scales`: coordinate scales ``(D, m)`` (``newton.coord_scales``).
-    - `robust` (static): points the checked step did not accept are re-solved by the robust
-      kernel; without, they stay failed (the straight-line program ``continuation`` tries
-      first: where every point passes, its values are the robust program's, bit for bit).
+    - `robust` (static): one checked step a point, and the points it did not accept
+      re-solved by the robust kernel; without, up to ``CHECKED_STEPS`` (``FRESH_STEPS``
+      from a guess) and the points those do not bring home stay failed (the straight-line
+      program ``continuation`` tries first).
     """
 
     mech: Mechanism
@@ -186,7 +187,8 @@ def robust_block(setup: StrokeSetup, u_blk, guesses, q_anchor, jac_guess):
     return per_point(setup, one, u_blk, guesses, jnp.broadcast_to(q_anchor[:, None], guesses.shape), jac_guess)
 
 
-# A nested jit: the checked step's and the fallback's calls (same shapes) share one trace.
+# A nested jit: the straight-line and the robust program of a mechanism (same shapes)
+# share its trace.
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def point_derivatives(mech: Mechanism, shared: bool, q, u, p, ok):
     """``implicit.input_derivatives`` at ``q (D, k, m)``, ``u ([D,] k, dof)``: ``(d1, d2)``
