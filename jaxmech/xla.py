@@ -13,8 +13,9 @@ jaxlib 0.10) take twice as long to compile the library's programs as the classic
 emitters, for the same values: the four-bar's stroke program compiles in 0.59 s instead of
 1.18 s and runs in 0.97 instead of 1.28 ms (``benchmarks/latency.py``).  ``jit`` compiles
 the library's programs with ``COMPILER_OPTIONS``, which turn them off: a field of XLA's
-debug options that only the CPU compiler reads (not yet run on a GPU: none was lent when
-this was written).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
+debug options that only the CPU compiler reads.  Other backends refuse it (jax 0.11.2 on an
+H200: ``INVALID_ARGUMENT: No such compile option``), so on them the library's programs
+compile with the backend's defaults (``_on_cpu``).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
 statuses, derivatives and points) comes out the same either way, to rounding.
 
 ``jit(..., stored=True)`` marks a program whose top-level calls (concrete arguments) go
@@ -65,14 +66,15 @@ def jit(fun=None, *, stored: bool = False, **kwargs):
 
 
 class _Jitted:
-    """A function jitted twice: with the options (top level) and without (inside a trace)."""
+    """A function jitted twice: with the options (top level, on a CPU) and without (inside a
+    trace, or on another backend, which refuses the CPU compiler's options)."""
 
     def __init__(self, top, nested):
         self._top, self._nested = top, nested
         functools.update_wrapper(self, nested)
 
     def __call__(self, *args, **kwargs):
-        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+        if not _on_cpu() or any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
             return self._nested(*args, **kwargs)
         try:
             return self._top(*args, **kwargs)
@@ -82,7 +84,7 @@ class _Jitted:
             return self._nested(*args, **kwargs)
 
     def __getattr__(self, name):  # lower, trace, eval_shape...: the top-level function's
-        return getattr(self._top, name)
+        return getattr(self._top if _on_cpu() else self._nested, name)
 
 
 class _Stored:

@@ -57,6 +57,7 @@ def test_unfused_saves_sines_on_cpu(monkeypatch):
 ROUNDING_EPS = 16
 
 
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="the options are the CPU compiler's; other backends refuse them")
 @pytest.mark.parametrize("scene_name", ["fourbar", "flap_msd", "sma_flap"])
 def test_compiler_options_give_the_same_values(scene_name):
     """The library compiles its programs with ``xla.COMPILER_OPTIONS`` (the classic CPU
@@ -80,3 +81,20 @@ def test_compiler_options_give_the_same_values(scene_name):
         a, b = np.asarray(a), np.asarray(b)
         scale = float(np.max(np.abs(b))) if b.size else 0.0
         np.testing.assert_allclose(a, b, rtol=0, atol=ROUNDING_EPS * eps * scale)
+
+
+def test_other_backends_compile_without_the_cpu_options(monkeypatch):
+    """A GPU refuses the CPU compiler's options (``No such compile option``, seen on an H200):
+    off the CPU a top-level call, ``lower`` and ``trace`` go to the plain ``jax.jit``."""
+    f = xla.jit(lambda x: 2.0 * x + 1.0)
+
+    def refuse(*args, **kwargs):
+        raise RuntimeError("INVALID_ARGUMENT: No such compile option: 'xla_cpu_use_fusion_emitters'")
+
+    monkeypatch.setattr(f, "_top", type("Refusing", (), {"__call__": refuse, "lower": refuse, "trace": refuse})())
+    monkeypatch.setattr(xla, "_on_cpu", lambda: False)
+    assert float(f(jnp.asarray(3.0))) == 7.0
+    assert "mul" in f.lower(jnp.asarray(3.0)).as_text()
+    monkeypatch.setattr(xla, "_on_cpu", lambda: True)  # on the CPU the options' program is the one called
+    with pytest.raises(RuntimeError, match="No such compile option"):
+        f(jnp.asarray(3.0))
