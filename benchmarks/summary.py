@@ -172,10 +172,27 @@ def design_table(doc) -> str:
         lines.append(f"Design problems: not run ({'; '.join(skipped) or 'python -m benchmarks.design --problems'}).")
     fp = doc.get("flap_problem") or {}
     if fp.get("gradient") and fp.get("nelder_mead"):
-        g, nm = fp["gradient"], fp["nelder_mead"]
-        lines += ["", f"flap_msd (`--flap`): constrained SLSQP {_f(g.get('objective'), '{:.2f}')} N m in {_f(g.get('wall_s'), '{:.1f}')} s "
-                  f"({_f(g.get('compile_s'), '{:.1f}')} s compiling), violation {_f(g.get('max_violation'), '{:.1e}')}; Nelder-Mead "
-                  f"{_f(nm.get('objective'), '{:.2f}')} N m after {_f(nm.get('wall_s'), '{:.1f}')} s; acceptance {fp.get('acceptance')}."]
+        lines += ["", f"flap_msd constrained design (`--flap`, {_f(fp.get('limit_deg'), '{:g}')} deg transmission limit, 4 starts; "
+                  "wall time includes each method's compile unless said):", "",
+                  "| method | best peak (N m) | starts converged | wall (s) | compile (s) |", "|---|---:|---:|---:|---:|"]
+        g = fp["gradient"]
+        lines.append(f"| jaxmech SQP, exact Hessians | {_f(g.get('objective'), '{:.6f}')} | {g.get('converged_starts')}/{g.get('starts')} | "
+                     f"{_f(g.get('wall_s'), '{:.2f}')} cold, {_f(g.get('time_to_nm_final_s_warm'), '{:.2f}')} warm | {_f(g.get('compile_s'), '{:.1f}')} |")
+        nm = fp["nelder_mead"]
+        lines.append(f"| Nelder-Mead (compiled before the clock) | {_f(nm.get('objective'), '{:.6f}')} | - | {_f(nm.get('wall_s'), '{:.2f}')} | - |")
+        for key, label in (("slsqp", "scipy SLSQP"), ("trust_constr", "scipy trust-constr, exact Hessians"),
+                           ("ipopt", "IPOPT (cyipopt), exact Hessians, after the evaluator's compile"), ("slsqp_jax", "slsqp-jax")):
+            r = fp.get(key) or {}
+            if not r or r.get("skipped"):
+                lines.append(f"| {label} | _{r.get('skipped', 'not run')}_ | | | |")
+                continue
+            runs = r.get("runs") or []
+            done = {"trust_constr": lambda x: x.get("status") in (1, 2), "ipopt": lambda x: x.get("status") == 0,
+                    "slsqp_jax": lambda x: bool(x.get("successful"))}.get(key)  # each method's own convergence statuses
+            conv = (sum(1 for x in runs if done(x)) if runs else sum(1 for it in r.get("iterations") or [] if it < 300))
+            lines.append(f"| {label} | {_f(r.get('objective'), '{:.6f}')} | {conv}/{len(runs) or len(r.get('iterations') or [])} | "
+                         f"{_f(r.get('wall_s'), '{:.2f}')} | {_f(r.get('compile_s'), '{:.1f}')} |")
+        lines.append("")
     ps = {k: v for k, v in (doc.get("path_synthesis") or {}).items() if isinstance(v, dict) and v.get("gradient")}
     for kind, r in ps.items():
         best = min(r.get("pylinkage_pso") or [{}], key=lambda x: x.get("error", float("inf")))
@@ -243,8 +260,33 @@ def flap_torque_table(doc) -> str:
     return "\n".join(lines).rstrip()
 
 
+def gpu_table(doc) -> str:
+    m = doc.get("machine") or {}
+    acc = (m.get("accelerator") or (doc.get("notes") or {}).get("accelerator") or [None, None])
+    lines = ["### Large sweeps on an accelerator (`benchmarks/gpu.py`)", "",
+             f"_{acc[1] or 'no accelerator'} beside a {m.get('cpu_count')}-core {m.get('cpu_model', '?')} host; jax "
+             f"{(m.get('versions') or {}).get('jax')}, {m.get('git')}, {m.get('date')}_", "",
+             f"`stroke_kinematics`, designs x {doc.get('positions', '?')} crank positions; errors on the first "
+             f"{doc.get('error_designs', '?')} designs:", "",
+             "| mechanism | platform | dtype | designs | compile (s) | run (s) | poses / s | position error | against | converged |",
+             "|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
+    for r in doc.get("rows") or []:
+        if "poses_per_s" not in r:
+            continue
+        key = next((k for k in ("err_vs_f64", "err_vs_closed_form", "f64_loop_residual") if k in r), None)
+        e = r.get(key) or {}
+        err = e["pos_m"] if "pos_m" in e else (e.get("pos") or {}).get("abs")  # loop residual (m) or angle error (rad)
+        lines.append(f"| {r['mech']} | {r['platform']} | {r['dtype']} | {_f(r.get('designs'), '{:,}')} | {_f(r.get('compile_s'), '{:.2f}')} | "
+                     f"{_f(r.get('run_s'), '{:.3f}')} | {_f(r.get('poses_per_s'), '{:.3g}')} | {_f(err, '{:.1e}')} | {key or '-'} | "
+                     f"{_f(r.get('converged_fraction'), '{:.3f}')} |")
+    for q in doc.get("ratios") or []:
+        lines.append(f"\n{q['mech']} {q['dtype']}: accelerator / CPU poses per second {_f(q.get('accelerator_over_cpu'), '{:.0f}x')}.")
+    return "\n".join(lines).rstrip()
+
+
 TABLES = {"kinematics": kinematics_table, "speed_error": speed_error_table, "scaling": scaling_table,
-          "dynamics": dynamics_table, "design": design_table, "sweep_scale": sweep_scale_table, "flap_torque": flap_torque_table}
+          "dynamics": dynamics_table, "design": design_table, "sweep_scale": sweep_scale_table, "flap_torque": flap_torque_table,
+          "gpu": gpu_table}
 
 
 def render(results: Path = RESULTS) -> str:
