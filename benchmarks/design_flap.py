@@ -51,6 +51,7 @@ import numpy as np
 
 LIMIT_DEG = 20.0
 STARTS = 4
+PEAK_SCALE = 3000.0  # N m, the document's peak: every method's torque rows in these units
 SLSQP_JAX_LIMIT_S = 600.0  # s: slsqp-jax's compile (about 76 s here) and run, then killed
 
 
@@ -72,7 +73,7 @@ def child(spec: dict) -> dict:
     doc = {k: DEFAULTS[k] for k in FLAP_VARS}  # the design a start that does not assemble moves towards
     for label, idx in spec.get("runs", {"all": list(range(n))}).items():
         t0 = time.perf_counter()
-        res = minimize_second_order(prob, {k: p0[k][idx] for k in FLAP_VARS}, flap_state_bounds(), peak_scale=3000.0, options=opts,
+        res = minimize_second_order(prob, {k: p0[k][idx] for k in FLAP_VARS}, flap_state_bounds(), peak_scale=PEAK_SCALE, options=opts,
                                     reference=doc)
         out[label] = {"wall_s": time.perf_counter() - t0, "value": res.value.tolist(), "status": res.status.tolist(),
                       "kkt": res.kkt.tolist(), "violation": res.violation.tolist(), "iterations": res.iterations.tolist(),
@@ -132,20 +133,20 @@ def slsqp(limit_deg: float, starts: int = STARTS) -> dict:
 
     x0 = {**flap_starts(starts), **{k: np.full(starts, DEFAULTS[k]) for k in FLAP_ELIMINATED}}
     t0 = time.perf_counter()
-    res = minimize(flap_state(101, np.deg2rad(limit_deg)), {k: x0[k] for k in FLAP_VARS}, flap_state_bounds(), peak_scale=3000.0, maxiter=300)
+    res = minimize(flap_state(101, np.deg2rad(limit_deg)), {k: x0[k] for k in FLAP_VARS}, flap_state_bounds(), peak_scale=PEAK_SCALE, maxiter=300)
     return {"objective": float(res.value[res.best]) if res.best >= 0 else None, "wall_s": time.perf_counter() - t0,
             "iterations": res.iterations.tolist(), "violation": res.violation.tolist(), "report": res.report()}
 
 
 class _Epigraph:
     """The flap problem in epigraph form for a general NLP solver: minimise ``t`` over
-    ``z = (x, t)`` with every sample's torque ``<= t`` (rows in units of ``SCALE``), the
+    ``z = (x, t)`` with every sample's torque ``<= t`` (rows in units of ``PEAK_SCALE``), the
     travel equalities and the transmission limits, the same box and starts.  Rows, Jacobians
     and Lagrangian Hessians are ``stroke_evaluator``'s (the same as the SQP's), compiled
     before any clock starts.  ``assembles(z)`` says whether the design assembles at every
     sample (a trial that does not has no rows: each solver hears it its own way)."""
 
-    SCALE = 3000.0  # N m: rows and t in units of the document's peak
+    SCALE = PEAK_SCALE
 
     def __init__(self, limit_deg: float, starts: int = STARTS):
         import jax
@@ -252,6 +253,12 @@ def ipopt(limit_deg: float, starts: int = STARTS, maxiter: int = 500) -> dict:
     n, k = e.n, e.k
     rows, cols = np.tril_indices(n + 1)
 
+    def _assembled(z):
+        """`z`, or IPOPT's evaluation error where the design does not assemble."""
+        if not e.assembles(z):
+            raise cyipopt.CyIpoptEvaluationError()
+        return z
+
     class _NLP:
         def objective(self, z):
             return z[n]
@@ -260,19 +267,13 @@ def ipopt(limit_deg: float, starts: int = STARTS, maxiter: int = 500) -> dict:
             return np.eye(n + 1)[n]
 
         def constraints(self, z):
-            if not e.assembles(z):
-                raise cyipopt.CyIpoptEvaluationError()
-            return e.c(z)
+            return e.c(_assembled(z))
 
         def jacobian(self, z):
-            if not e.assembles(z):
-                raise cyipopt.CyIpoptEvaluationError()
-            return e.c_jac(z).ravel()
+            return e.c_jac(_assembled(z)).ravel()
 
         def hessian(self, z, lagrange, obj_factor):
-            if not e.assembles(z):
-                raise cyipopt.CyIpoptEvaluationError()
-            return e.c_hess(z, np.asarray(lagrange))[rows, cols]  # the objective t is linear
+            return e.c_hess(_assembled(z), np.asarray(lagrange))[rows, cols]  # the objective t is linear
 
         def hessianstructure(self):
             return rows, cols
@@ -299,8 +300,10 @@ def ipopt(limit_deg: float, starts: int = STARTS, maxiter: int = 500) -> dict:
 
 def slsqp_jax(limit_deg: float, starts: int = STARTS, max_steps: int = 300) -> dict:
     """slsqp-jax (a pure-JAX SLSQP on optimistix, L-BFGS Hessian model) on the epigraph form,
-    every start in one ``vmap``ped ``optimistix.minimise`` call, with the exact rows and
-    Jacobians of ``stroke_evaluator`` supplied; rtol = atol = 1e-8.  A trial design that does
+    every start in one ``vmap``ped ``optimistix.minimise`` call, given the rows and their exact
+    Jacobians (forward mode through the implicit rule, ``stroke_state``; no Hessians: it keeps
+    its own model); rtol = atol = 1e-8.  ``_Epigraph``'s compiled evaluator only makes the
+    starts and scores the results, outside the clock.  A trial design that does
     not assemble has NaN rows.  ``wall_s`` is the compile (``compile_s``) and the run
     (``run_s``).  Absent when slsqp_jax does not import."""
     try:
