@@ -12,29 +12,20 @@ stroke) takes one Newton step per point.
 
 Gaps (stretches where the mechanism cannot be assembled): an anchor that failed is never
 used.  The last trusted anchor is kept, and once a block ends in failure its derivatives
-are dropped, so the points after a gap restart from the last trusted pose itself (damped
-Newton, branch guard) instead of a Taylor series extrapolated across the gap.
+are dropped, so the walk never extrapolates a Taylor series across a gap.  The points the
+walk does not solve (a gap, and what follows it) are ``stroke_repair``'s: one fresh
+assembly at each failed end of the stroke, continuation from there back towards the gap
+(a stroke re-enters the assemblable range at a toggle, reachable from the far side only),
+and every point still failed solved on its own from its nearest converged neighbours:
+bounded work per failed point, batched over all of them.
 
-The reverse walk: a stroke that re-enters the assemblable range does so at a toggle,
-where the requested branch's poses exist but are hard to reach from the last pose before
-the gap (Newton's steps there run across the fold to the other branch); they are easy to
-reach from the well-conditioned stretch after them.  So where a design has a failed point
-followed by a converged one, the same scan walks the stroke once more in reverse, from that
-design's last converged pose, and the points it solves on the requested branch that the
-forward walk did not take its answer (``merge_reverse``).  It is part of the one compiled
-program (the scan's second half, skipped block by block when no design needs it), so a
-stroke gives the same statuses and values eager and under a user's ``jax.jit``.
-
-Two programs: called with concrete arguments, a stroke first runs the straight-line
-program (checked steps only, up to ``FRESH_STEPS`` plain Newton steps from each design's
-guess at its first point, forward only: ``walk(..., robust=False)``), and the robust
-program (the re-solve and the reverse walk) only where some point failed it: a design whose
-points all pass keeps the straight-line values, the others take the robust program's (so a
-design's answer never depends on the other designs of its batch).  A smooth stroke's first
-answer thus compiles only what it runs.  ``run_scene`` and the sweep kernels follow the same rule per design
-(``straight_then_robust``), so a sweep and ``run_scene`` give the same bits.  A traced call
-(a user's ``jit``, ``vmap``) is the robust program; its values may differ from the
-straight-line program's in the last bit (two compiled programs).
+One program for traced calls (a user's ``jit``, ``vmap``, ``grad``): the walk, then the
+repair under a ``lax.cond`` that skips it when every point converged.  Concrete calls run
+the walk's program for every design and the repair's program only for the designs with a
+failed point (``straight_then_robust``: gathered into batches of ``robust_size`` designs),
+from the walk's own results: a design's answer never depends on the others of its batch,
+and the smooth case compiles and runs the walk alone.  ``run_scene`` and the sweep kernels
+follow the same rule per design, so a sweep and ``run_scene`` give the same bits.
 
 Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
 a few sizes per octave, so 361 and 362 points share one compiled program.
@@ -59,10 +50,12 @@ from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
 from .stroke_point import assemble, checked_step, predict
 from .stroke_attach import Walked, attach, eager_attach
-from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, WalkState, stroke_step, walk_block
+from .stroke_repair import repair
+from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
 from .xla import jit, unfused
 
-__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "all_converged", "predict", "bucket", "assemble", "checked_step", "merge_reverse"]
+__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "repaired_rows", "robust_size",
+           "repair_stroke", "all_converged", "predict", "bucket", "assemble", "checked_step"]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -104,7 +97,7 @@ def unblock(x, d: int, k: int, nb: int):
 
 
 # --------------------------------------------------------------------------- the program's parts
-def stroke_setup(mech, options, derivs, us, p, guess, robust: bool = True):
+def stroke_setup(mech, options, derivs, us, p, guess):
     """``(StrokeSetup, us, guess)`` with non-finite inputs, parameters and guesses replaced
     once, here, by harmless values (their samples are flagged later): no derivative code
     ever sees a NaN that could leak into a batch gradient."""
@@ -123,7 +116,7 @@ def stroke_setup(mech, options, derivs, us, p, guess, robust: bool = True):
     else:
         b0 = jnp.zeros((d,), dtype)
     scales = jax.vmap(lambda p_: coord_scales(mech, p_, dtype))(ps)
-    return StrokeSetup(mech, options, bool(derivs), us.ndim == 2, ps, b0, scales, robust), us_s, g0
+    return StrokeSetup(mech, options, bool(derivs), us.ndim == 2, ps, b0, scales), us_s, g0
 
 
 def inputs_finite(us, p, guess):
@@ -133,110 +126,37 @@ def inputs_finite(us, p, guess):
     return jnp.all(jnp.isfinite(pv), axis=0)[:, None] & jnp.all(jnp.isfinite(us), axis=-1) & jnp.all(jnp.isfinite(guess), axis=-1)[:, None]
 
 
-def empty_points(setup: StrokeSetup, g0, u_first, k: int) -> PointResults:
-    """Zeros shaped like one block's ``PointResults`` (what a skipped reverse block outputs)."""
-    mech, (d, m), dtype = setup.mech, g0.shape, g0.dtype
-    dof = u_first.shape[-1]
-    br = jax.eval_shape(jax.vmap(lambda g_, u_, p_: branch_value(mech, g_, u_, p_)), g0, u_first, setup.p)
-    z = lambda *shape: jnp.zeros((d, k) + shape, dtype)  # noqa: E731
-    i = jnp.zeros((d, k), jnp.int32)
-    derivs = (z(m, dof), z(m, dof, dof)) if setup.derivs else (None, None)
-    return PointResults(z(m), i, i, z(), z(), jnp.zeros((d, k) + br.shape[1:], br.dtype), *derivs)
+def walk_inputs(us_s, k: int, nblk: int) -> BlockInput:
+    """The scan's inputs: the stroke's blocks (``block_layout``), the first one fresh."""
+    return BlockInput(u=block_layout(us_s, k, nblk), fresh=jnp.asarray(np.arange(nblk + 1) == 0))
 
 
-def reverse_points(x, n, fill=None):
-    """``x (..., nb, ...)`` (points on axis ``-2`` without ``fill``, else axis 1) with its
-    first ``n`` points in reverse order (``n`` traced): a flip and a dynamic slice, not a
-    gather (a gather per field cost hundreds of lines of the program).  The entries past
-    ``n`` are ``fill`` (``(..., 1, dof)``) where given, else unspecified."""
-    axis = -2 if fill is not None else 1
-    nb = x.shape[axis]
-    f = jnp.flip(x, axis)
-    out = jax.lax.dynamic_slice_in_dim(jnp.concatenate([f, f], axis), nb - n, nb, axis % x.ndim)
-    if fill is None:
-        return out
-    return where((jnp.arange(nb) < n)[:, None], out, fill)
-
-
-def walk_inputs(setup: StrokeSetup, us_s, valid, n, k: int, nblk: int):
-    """``(BlockInput, us_r)``: the scan's inputs, the forward blocks then the reverse walk's,
-    and the reversed stroke ``us_r`` (the stroke's ``n`` points reversed, padded with point 0:
-    ``n`` is traced, one program serves a bucket)."""
-    nb = us_s.shape[-2]
-    idx = block_points(nb, k, nblk)
-    # the inputs' block layout (no gather), less block 0's repeats and the padding
-    valid_f = block_layout(valid[..., None], k, nblk)[..., 0] & ((idx >= 0)[:, None] & (jnp.asarray(idx)[:, None] < n))
-    us_r = reverse_points(us_s, n, fill=us_s[..., :1, :])
-    flags = np.arange(2 * (nblk + 1)) >= nblk + 1
-    return BlockInput(
-        u=jnp.concatenate([block_layout(us_s, k, nblk), block_layout(us_r, k, nblk)]),
-        valid=jnp.concatenate([valid_f, jnp.zeros_like(valid_f)]),
-        reverse=jnp.asarray(flags),
-        restart=jnp.asarray(np.arange(2 * (nblk + 1)) == nblk + 1),
-        fresh=jnp.asarray(np.isin(np.arange(2 * (nblk + 1)), (0, nblk + 1))),
-    ), us_r
-
-
-def merge_reverse(mech: Mechanism, fwd: PointResults, back: PointResults, need, n, valid) -> PointResults:
-    """The forward walk's points, ``(D, nb, ...)``, where a design that ``need``s it takes the
-    reverse walk's answer (``back``, in reversed order) at the points the forward walk did
-    not solve (``valid``: finite inputs) and the reverse walk solved on the branch.
-
-    The reverse walk may count turns differently: each run it filled is shifted by the whole
-    turns that match it to the forward walk at the converged point that follows the run
-    (where both walks found the same pose), so the angles stay continuous as numbers.
-    """
-    nb = fwd.status.shape[1]
-    i = jnp.arange(nb)
-    back = jax.tree_util.tree_map(lambda x: reverse_points(x, n), back)
-    conv_f = (fwd.status == Status.CONVERGED) & valid
-    conv_b = back.status == Status.CONVERGED
-    take = need[:, None] & ~conv_f & conv_b & (i < n)
-    merged = PointResults(*(None if f is None else where(take.reshape(take.shape + (1,) * (f.ndim - 2)), b, f) for f, b in zip(fwd, back)))
-    # r1: the first point at or after each one that the reverse walk did not fill; one
-    # gather reads both walks' agreement and turn difference there
-    r1 = jax.lax.cummin(jnp.where(take, nb, i), axis=1, reverse=True)
-    both = (conv_f & conv_b)[..., None].astype(fwd.q.dtype)
-    at_r1 = jnp.take_along_axis(jnp.concatenate([fwd.q - back.q, both], axis=-1), jnp.clip(r1, 0, nb - 1)[..., None], axis=1)
-    joined = take & (r1 < n) & (at_r1[..., -1] > 0.5)
-    angle = ~jnp.asarray(mech.coord_is_length())
-    turns = jnp.round(at_r1[..., :-1] / (2 * jnp.pi))
-    # a select, not "+ 0.0": an untouched angle keeps its bits (-0.0 too), as without the walk
-    return merged._replace(q=where(joined[..., None] & angle, merged.q + 2 * jnp.pi * turns, merged.q))
+def any_failed(points: PointResults, valid, n):
+    """``(D, nb)``: the stroke points (the first ``n``) with finite inputs not solved."""
+    return valid & (points.status != Status.CONVERGED) & (jnp.arange(valid.shape[1]) < n)
 
 
 # --------------------------------------------------------------------------- the stroke program
 def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
-    """Strokes of D designs walked, forward then in reverse where needed: ``us (nb, dof)``
-    shared or ``(D, nb, dof)`` one per design (bucketed: the first ``n`` points are the
-    stroke), ``p`` leaves ``(D,)``, ``guess (D, m)``.  The forward walk and the reverse walk
-    are one scan over the blocks of the stroke and then of the reversed stroke
-    (``stroke_stages.stroke_step``).  Values only: nothing here is differentiated.
-
-    ``robust=False``: the straight-line walk (checked steps only, up to ``CHECKED_STEPS`` a
-    point and ``FRESH_STEPS`` from the guess, forward only): a point those do not bring to
-    the tests stays failed.  Where both walks converge they agree to rounding: the robust
-    walk takes one checked step a point and re-solves the rest, the first point included."""
-    setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess, robust)
+    """Strokes of D designs: ``us (nb, dof)`` shared or ``(D, nb, dof)`` one per design
+    (bucketed: the first ``n`` points are the stroke), ``p`` leaves ``(D,)``, ``guess
+    (D, m)``.  The walk (one scan over the stroke's blocks, ``stroke_stages.walk_block``),
+    then, with ``robust``, ``stroke_repair.repair`` of the points it did not solve (under a
+    ``lax.cond``: skipped where every point converged).  Values only: nothing here is
+    differentiated."""
+    setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
     d, nb = guess.shape[0], us.shape[-2]
     k = block_size(nb, options.anchors)
     nblk = -(-(nb - 1) // k) if nb > 1 else 0
     valid = inputs_finite(us, p, guess)  # (D, nb)
-    xs, us_r = walk_inputs(setup, us_s, valid, n, k, nblk)
     u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
     m, dof = mech.m, us.shape[-1]
-    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first,
-                       WalkState(jnp.zeros((d,), bool), jnp.zeros((d,), bool), g0))  # fmt: skip
-    if not robust:
-        forward = jax.tree_util.tree_map(lambda x: x[: nblk + 1], xs)
-        _, out = jax.lax.scan(functools.partial(walk_block, setup), init, forward)
-        return Walked(jax.tree_util.tree_map(lambda x: unblock(x, d, k, nb), out), valid, setup.b0)
-    u_first_r = jnp.broadcast_to(us_r[..., 0, :], (d, dof))
-    step = functools.partial(stroke_step, setup, g0, u_first_r, empty_points(setup, g0, u_first, k))
-    last, out = jax.lax.scan(step, init, xs)
-    fwd = jax.tree_util.tree_map(lambda x: unblock(x[: nblk + 1], d, k, nb), out)
-    back = jax.tree_util.tree_map(lambda x: unblock(x[nblk + 1 :], d, k, nb), out)
-    return Walked(merge_reverse(mech, fwd, back, last.walk.need, n, valid), valid, setup.b0)
+    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first)
+    _, out = jax.lax.scan(functools.partial(walk_block, setup), init, walk_inputs(us_s, k, nblk))
+    points = jax.tree_util.tree_map(lambda x: unblock(x, d, k, nb), out)
+    if robust:
+        points = jax.lax.cond(jnp.any(any_failed(points, valid, n)), lambda x: repair(setup, us_s, x, valid, n, g0), lambda x: x, points)
+    return Walked(points, valid, setup.b0)
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2, 3, 4), stored=True)  # a new process loads it (jaxmech.stored)
@@ -247,6 +167,30 @@ def _stroke_program(mech, options, derivs, single, robust, us, p, guess, n):
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
+def as_points(sol: Solution, d1, d2) -> PointResults:
+    """A stroke's ``(Solution, d1, d2)`` (``attach``'s) as the walk's ``PointResults`` again:
+    the values at converged points (``attach`` passes them through), zeros elsewhere."""
+    ok = sol.status == Status.CONVERGED
+    zero = lambda x: None if x is None else where(ok.reshape(ok.shape + (1,) * (x.ndim - ok.ndim)), x, 0.0)  # noqa: E731
+    return PointResults(zero(sol.q), sol.status, sol.steps, sol.residual, sol.cond, sol.branch, zero(d1), zero(d2))
+
+
+def repair_stroke(mech, options, derivs, us, p, guess, n, walked):
+    """``(Solution, d1, d2)`` of a walked stroke (the walk's ``(Solution, d1, d2)``, ``(D, nb)``
+    in front) with its failed points repaired (``stroke_repair.repair``); traceable."""
+    setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
+    valid = inputs_finite(us, p, guess)
+    points = repair(setup, us_s, as_points(*walked), valid, n, g0)
+    return attach(mech, Walked(points, valid, setup.b0), us, p)
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2), stored=True)
+def _repair_program(mech, options, derivs, us, p, guess, n, walked):
+    """``repair_stroke`` as a program of its own: what a concrete stroke runs for the designs
+    whose walk left a point failed."""
+    return repair_stroke(mech, options, derivs, us, p, guess, n, walked)
+
+
 @functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)
 def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
@@ -255,9 +199,19 @@ def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     return walk(mech, options, derivs, us, p, guess, n, robust)
 
 
+# --------------------------------------------------------------------------- concrete strokes
 def all_converged(status) -> np.ndarray:
     """Per design (``()`` for one), whether every sample of ``status (..., N)`` converged."""
     return np.all(np.asarray(status) == Status.CONVERGED, axis=-1)
+
+
+def robust_size(d: int) -> int:
+    """How many designs one call of a repair program takes for a batch of ``d``: all of a
+    small batch, else a quarter of it (a power of two, at least 8), so the repair compiles
+    once per batch size and costs what the failed designs need."""
+    if d <= 8:
+        return d
+    return min(d, max(8, 1 << (d // 4 - 1).bit_length()))
 
 
 def _per_design(passed: np.ndarray, straight, robust):
@@ -273,15 +227,43 @@ def _per_design(passed: np.ndarray, straight, robust):
     return jax.tree_util.tree_map(pick, straight, robust)
 
 
-def straight_then_robust(run, passed_of):
-    """``run(False)`` (a straight-line program), then ``run(True)`` (the robust one) only if
-    some design did not pass (``passed_of(result)``: a bool per design, ``(D,)`` or ``()``):
-    each design keeps the first result where it passed and takes the second's elsewhere.
-    One rule for every concrete stroke: ``stroke``, ``scenes.evaluation.evaluate`` and the
-    sweep kernels, so a design's result is the same whichever of them computed it."""
+def repaired_rows(straight, passed: np.ndarray, repair_rows, size: int):
+    """``straight`` (design axis first) with the rows of the designs that did not pass
+    replaced by ``repair_rows(idx)``'s (``idx``: ``size`` design indices, the failed ones in
+    order, padded by repeating the first), as device arrays."""
+    failed = np.flatnonzero(~passed)
+    out = jax.tree_util.tree_map(np.array, straight)  # writable host copies
+    for start in range(0, failed.size, size):
+        part = failed[start : start + size]
+        idx = np.concatenate([part, np.full(size - part.size, part[0])])
+        res = repair_rows(idx)
+
+        def put(o, r, part=part):
+            o[part] = np.asarray(r)[: part.size]
+
+        jax.tree_util.tree_map(put, out, res)
+    return jax.tree_util.tree_map(jax.device_put, out)
+
+
+def straight_then_robust(run, passed_of, repair_rows=None, size: int | None = None):
+    """``run(False)`` (the walk alone), then, only if some design did not pass
+    (``passed_of(result)``: a bool per design, ``(D,)`` or ``()``), its repair: by
+    ``repair_rows(idx, straight)`` for the failed designs alone in batches of ``size``
+    (``repaired_rows``) where given, else ``run(True)`` for all.  Each design keeps the
+    first result where it passed.  One rule for every concrete stroke: ``stroke``,
+    ``scenes.evaluation.evaluate`` and the sweep kernels, so a design's result is the same
+    whichever of them computed it."""
     straight = run(False)
     passed = np.asarray(passed_of(straight))
-    return straight if np.all(passed) else _per_design(passed, straight, run(True))
+    if np.all(passed):
+        return straight
+    if repair_rows is None or passed.ndim == 0:
+        return _per_design(passed, straight, run(True))
+    return repaired_rows(straight, passed, lambda idx: repair_rows(idx, straight), size or robust_size(passed.size))
+
+
+def _rows(tree, idx):
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], tree)
 
 
 def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False,
@@ -289,9 +271,10 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     """Checks, broadcasting and shape bucketing shared by ``solve_stroke`` and
     ``kinematics.stroke_kinematics``.  Returns ``(Solution, d1, d2)`` (None without ``derivs``).
     ``per_design``: ``us (D, N, dof)`` holds one stroke per design (``p`` leaves ``(D,)``).
-    ``robust``: None picks the program (concrete arguments: the straight-line one, then the
-    robust one where a point failed it; traced: the robust one); True or False forces one
-    (False: a caller that checks the statuses and runs the robust one itself)."""
+    ``robust``: None picks the programs (concrete arguments: the walk, then the repair for
+    the designs where a point failed it; traced: the walk and the repair as one program);
+    True or False forces one (False: the walk alone, for a caller that checks the statuses
+    and repairs itself)."""
     us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
     if per_design:
         us_ = us_.reshape(np.shape(us))  # (D, N, dof) as given
@@ -319,21 +302,17 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     if nb > n:  # pad by repeating the last input
         us_ = xp.concatenate([us_, xp.repeat(us_[..., -1:, :], nb - n, axis=-2)], axis=-2)
     # n traced: one program serves every length of a bucket
-    # Concrete arguments run the straight-line program first (checked steps only: a third
-    # of the compile) and the robust one only where some point failed it: a smooth stroke's
-    # first answer compiles only what it runs.
     derivs, n_ = bool(derivs), np.int32(n)
     stopped = jax.tree_util.tree_map(jax.lax.stop_gradient, (us_, pf, gf)) if traced and robust is None else None
     if robust is not None:
         out = _stroke_program(mech, options, derivs, single, bool(robust), us_, pf, gf, n_)
     elif not traced:
-        out = straight_then_robust(lambda r: _stroke_program(mech, options, derivs, single, r, us_, pf, gf, n_),
-                                   lambda o: all_converged(o[0].status))  # fmt: skip
+        out = _concrete(mech, options, derivs, single, per_design, us_, pf, gf, n_)
     elif not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
         # differentiated eagerly: the walk (values only) runs as a stored program, and the
         # autodiff traces only the implicit rule's attachment
         walked = straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
-                                      lambda w: np.all(np.asarray(w.converged), axis=-1))  # fmt: skip
+                                      lambda w: np.all(np.asarray(w.converged)[:, : n], axis=-1))  # fmt: skip
         out = eager_attach(mech, single, walked, us_, pf)
     else:
         out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)
@@ -345,6 +324,28 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
             # jax.device_put, not jnp.asarray: the latter compiles a small staging program per shape
             out = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x).take(np.arange(n), axis=axis)), out)
     return out
+
+
+def _concrete(mech, options, derivs, single, per_design, us_, pf, gf, n_):
+    """A concrete stroke (bucketed, ``(D, nb)``): the walk's program for every design, the
+    repair's for the designs it left a point failed (``straight_then_robust``)."""
+    n = int(n_)
+
+    def passed_of(o):
+        return all_converged(np.asarray(o[0].status)[..., :n])
+
+    def repair_rows(idx, straight):
+        us_i = us_[idx] if per_design else us_
+        return _repair_program(mech, options, derivs, us_i, {k: v[idx] for k, v in pf.items()}, gf[idx], n_, _rows(straight, idx))
+
+    if single:
+        straight = _stroke_program(mech, options, derivs, True, False, us_, pf, gf, n_)
+        if passed_of(straight):
+            return straight
+        walked = jax.tree_util.tree_map(lambda x: np.asarray(x)[None], straight)
+        return jax.tree_util.tree_map(lambda x: x[0], _repair_program(mech, options, derivs, us_, pf, gf, n_, walked))
+    run = lambda r: _stroke_program(mech, options, derivs, False, r, us_, pf, gf, n_)  # noqa: E731
+    return straight_then_robust(run, passed_of, repair_rows)
 
 
 def solve_stroke(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions(), throw: bool = False) -> Solution:

@@ -24,7 +24,7 @@ from .status import Status
 from .structure import blocks
 from .xla import unfused
 
-__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "assemble", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
+__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "assemble", "multistart", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 
 
 # --------------------------------------------------------------------------- predictor
@@ -204,28 +204,63 @@ def score(status):
     return where(status == Status.CONVERGED, 2, where(status == Status.BRANCH, 1, 0))
 
 
-def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False, jac_guess=None) -> NewtonResult:
+def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, target, inputs_finite: bool = False,
+               skip=None, branch0=None) -> tuple[NewtonResult, jax.Array]:
+    """``newton.newton`` from ``starts[j]`` (``(S, m)``) with the step cap ``caps[j]``, for
+    ``j = 0 .. count - 1`` (``count`` may be traced) one after another until a root on the
+    requested branch (``target``) is found.  One call site of the kernel, in a
+    ``while_loop``: under ``vmap`` a lane whose first start closes costs one Newton solve,
+    and finished lanes skip the later starts.  The best answer is kept: a root on the
+    branch, else one that exists only on another branch (``BRANCH`` says more than a
+    stall), else the first start's own status; the earliest start wins a tie.  ``skip``
+    (traced bool): no start is run (the lane's answer is not wanted).  ``branch0``: the
+    branch indicator at ``starts[0]`` where the caller has it (the result's where no start
+    ran).  Returns ``(best NewtonResult, index of its start)``."""
+    dtype = starts.dtype
+    last = starts.shape[0] - 1
+    if branch0 is None:
+        branch0 = branch_value(mech, starts[0], u, p) if has_branch(mech) else jnp.asarray(jnp.nan, dtype)
+
+    def wanted(carry):
+        j, _, best_score, _ = carry
+        return (j < count) & (best_score < 2)
+
+    def attempt(carry):
+        j, best, best_score, j_best = carry
+        k = jnp.clip(j, 0, last)
+        res = newton(mech, opts, u, p, starts[k], target, caps[k].astype(dtype), skip=~wanted(carry), inputs_finite=inputs_finite)
+        take = wanted(carry) & (score(res.status) > best_score)
+        pick = lambda a, b: where(take, a, b)  # noqa: E731
+        return j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score), pick(k, j_best)
+
+    zero = jnp.zeros((), dtype)
+    none = NewtonResult(starts[0], jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
+                        branch0, jnp.zeros((), jnp.int32))
+    first = jnp.asarray(-1) if skip is None else where(skip, 2, -1)
+    init = per_lane((jnp.zeros((), jnp.int32), none, first, jnp.zeros((), jnp.int32)), jnp.all(jnp.isfinite(starts[0])))
+    _, best, _, j_best = jax.lax.while_loop(wanted, attempt, init)
+    return best, j_best
+
+
+def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False, jac_guess=None,
+             skip=None) -> NewtonResult:
     """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
     from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
 
-    ``newton.newton`` runs from one start after another until a root on the branch is
-    found: the guess (the anchor itself where the predicted guess is off the branch), the
-    guess again with a tenth of the step cap (which keeps Newton on the near side of a fold,
-    a toggle the stroke re-enters at, where full steps overshoot), then ``STARTS`` fixed
-    offsets around ``ref``: the fresh assembly a stroke needs after a gap, where no pose
-    near the last trusted one exists to continue from.  One call site of the kernel, in a
-    ``while_loop``: under ``vmap`` a block whose points all close from their guesses costs
-    one Newton solve, as without restarts, and finished lanes skip the later starts.  The
-    best answer is kept: a root on the branch, else one that exists only on another branch
-    (``BRANCH`` says more than a stall), else the guess's own status; the earliest start
-    wins a tie.  Angles are then moved by whole turns to lie within half a turn of the
-    guess (where the equations allow it: checked on the residual), so a stroke's angles are
-    continuous as numbers.
+    ``multistart`` from the guess (the reference pose itself where the guess is off the
+    branch), the guess again with a tenth of the step cap (which keeps Newton on the near
+    side of a fold, a toggle the stroke re-enters at, where full steps overshoot), then
+    ``STARTS`` fixed offsets around ``ref``: the fresh assembly a stroke needs at its first
+    point and after a gap, where no pose near the last trusted one exists to continue from.
+    Angles are then moved by whole turns to lie within half a turn of the guess (where the
+    equations allow it: checked on the residual), so a stroke's angles are continuous as
+    numbers.
 
     ``inputs_finite``: as for ``newton`` (the stroke program sanitises its inputs once).
     ``jac_guess``: the constraint Jacobian at the guess (any positive scaling), where the
     caller has it (the checked step): the guess's block determinants are read from it.
-    Returns the best start's ``newton.NewtonResult`` (``q`` moved by the whole turns).
+    ``skip``: as ``multistart``'s.  Returns the best start's ``newton.NewtonResult`` (``q``
+    moved by the whole turns).
     """
     dtype = guess.dtype
     s = coord_scales(mech, p, dtype)
@@ -233,24 +268,8 @@ def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inp
     b_guess = branch_value(mech, guess, u, p, jac_guess)
     g0 = where(on_branch(target, b_guess), guess, ref) if has_branch(mech) else guess
     table = ref[None] + jnp.asarray(start_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
-    last = STARTS + 2
-
-    def wanted(carry):
-        j, best, best_score = carry
-        return (j < last) & (best_score < 2)
-
-    def attempt(carry):
-        j, best, best_score = carry
-        g = where(j < 2, g0, table[jnp.clip(j - 2, 0, STARTS - 1)])
-        cap = where(j == 1, 0.1 * opts.max_step, opts.max_step).astype(dtype)
-        res = newton(mech, opts, u, p, g, target, cap, skip=~wanted(carry), inputs_finite=inputs_finite)
-        take = wanted(carry) & (score(res.status) > best_score)
-        pick = lambda a, b: where(take, a, b)  # noqa: E731
-        return j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score)
-
-    zero = jnp.zeros((), dtype)
-    none = NewtonResult(guess, jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
-                        b_guess, jnp.zeros((), jnp.int32))
-    init = per_lane((jnp.zeros((), jnp.int32), none, jnp.asarray(-1)), jnp.all(jnp.isfinite(guess)))
-    _, best, _ = jax.lax.while_loop(wanted, attempt, init)
+    starts = jnp.concatenate([g0[None], g0[None], table])
+    caps = np.full(STARTS + 2, opts.max_step)
+    caps[1] = 0.1 * opts.max_step
+    best, _ = multistart(mech, opts, u, p, starts, jnp.asarray(caps, dtype), STARTS + 2, target, inputs_finite, skip, b_guess)
     return best._replace(q=whole_turns(mech, opts, best.q, guess, u, p, best.status == Status.CONVERGED, best.residual))
