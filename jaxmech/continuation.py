@@ -55,7 +55,7 @@ from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, w
 from .xla import jit, unfused
 
 __all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "repaired_rows", "robust_size",
-           "repair_stroke", "all_converged", "predict", "bucket", "assemble", "checked_step"]
+           "repair_stroke", "repair_strokes", "all_converged", "predict", "bucket", "assemble", "checked_step"]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -182,6 +182,20 @@ def repair_stroke(mech, options, derivs, us, p, guess, n, walked):
     valid = inputs_finite(us, p, guess)
     points = repair(setup, us_s, as_points(*walked), valid, n, g0)
     return attach(mech, Walked(points, valid, setup.b0), us, p)
+
+
+def repair_strokes(mech, us, p, guess, options, walked):
+    """Per-design strokes ``us (D, N, dof)`` walked by the walk alone (``walked``: its
+    ``(Solution, d1, d2)``, ``(D, N)`` in front), with their failed points repaired: what a
+    scene's repair stage runs (traceable; bucketed as ``stroke`` buckets)."""
+    n = us.shape[-2]
+    nb = bucket(n)
+
+    def pad(x):
+        return x if nb == n else jnp.concatenate([x, jnp.repeat(x[:, -1:], nb - n, axis=1)], axis=1)
+
+    out = repair_stroke(mech, options, walked[1] is not None, pad(us), p, guess, jnp.int32(n), jax.tree_util.tree_map(pad, walked))
+    return jax.tree_util.tree_map(lambda x: x[:, :n], out)
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2), stored=True)

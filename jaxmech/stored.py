@@ -394,20 +394,26 @@ def _shapes(tree):
     return jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), tree)
 
 
-def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, args2):
+def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, args2, with_first: bool = False):
     """``second(*static2, *args2(first(*static1, *args1)))`` for two ``jit`` functions whose
     static arguments come first: two programs, each run by its stored executable where that
     is exactly equivalent (as ``cached_call``).  Where they must be compiled, they are
     compiled at once: XLA compiles the first on a thread of its own while the second is
     traced and compiled here (a scene's stroke, then its kinematics and outputs: 2 cores
-    do both in about the time of the longer).  ``args2``: a function of the first's outputs
+    do both in about the time of the longer).  ``with_first``: returns ``(first's outputs,
+    second's)``.  ``args2``: a function of the first's outputs
     (arrays, or their ``ShapeDtypeStruct``s) giving the second's arguments.  With the store
     off, the programs are kept for this process only."""
+    def plain():
+        out1 = first(*static1, *args1)
+        out2 = second(*static2, *args2(out1))
+        return (out1, out2) if with_first else out2
+
     if jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
-        return second(*static2, *args2(first(*static1, *args1)))
+        return plain()
     key1 = _key(first, static1, args1)
     if key1 is None:
-        return second(*static2, *args2(first(*static1, *args1)))
+        return plain()
     folder = store_dir()
     slot1 = (str(folder), key1)
     fresh = []
@@ -446,11 +452,11 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
         if key2 is not None:
             _PROGRAMS.pop(slot2, None)
         _STATS["fallback"] += 1
-        return second(*static2, *args2(first(*static1, *args1)))
+        return plain()
     if folder is not None:
         for key, prog in fresh:  # stored while the answer runs, on threads of their own
             _store_later(_path(folder, key), prog)
-    return out2
+    return (out1, out2) if with_first else out2
 
 
 def cached_json(label: str, static: tuple, compute):

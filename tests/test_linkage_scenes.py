@@ -221,9 +221,10 @@ def test_fourbar_effort_and_reactions_newton_euler():
     the crank torque and the four pins' reactions against the per-body Newton-Euler
     equations solved with numpy on the hand-written scene's kinematics (its points' positions
     and accelerations, its angular accelerations)."""
-    over = {"g": G}
+    over, inertia = {"g": G}, {}
     for link, (m, length, _) in FOURBAR_BODIES.items():
-        over[f"m_{link}"], over[f"J_{link}"] = m, m * length**2 / 12
+        # a uniform bar's inertia follows from its length in the linkage (derived)
+        over[f"m_{link}"], inertia[link] = m, m * length**2 / 12
     table = linkage_run("fourbar", **over).table()
     hand = hand_run("fourbar")
     ht = hand.table()
@@ -240,7 +241,7 @@ def test_fourbar_effort_and_reactions_newton_euler():
         e1, e2 = FOURBAR_ENDS[link]
         G_, vG, aG = (0.5 * (x[e1] + x[e2]) for x in (pos, vel, acc))  # the bar's midpoint
         omega, alpha = ht[f"{FOURBAR_ANGLES[link]}_dot[rad/s]"], ht[f"{FOURBAR_ANGLES[link]}_ddot[rad/s^2]"]
-        J = over[f"J_{link}"]
+        J = inertia[link]
         f = m * (aG - gvec)
         rhs[:, 3 * k], rhs[:, 3 * k + 1], rhs[:, 3 * k + 2] = f.real, f.imag, J * alpha
         for joint, sign in pins:

@@ -46,7 +46,8 @@ def test_readme_linkage_example_runs_and_balances_every_body():
     res, hold, jm, watt = ns["res"], ns["hold"], ns["jm"], ns["watt"]
     assert np.all(np.asarray(res.status) == jm.Status.CONVERGED) and np.all(np.asarray(hold.status) == jm.Status.CONVERGED)
     p = watt.params
-    m, J, g = p["m_crank"], p["J_crank"], p["g"]
+    m, _, J = watt.mass_properties()["crank"]
+    g = p["g"]
     # crank: F_O2 (ground on crank) - F_A (crank on coupler) + m g = m a_G; moments about G_crank
     G, _, aG = (np.asarray(x) for x in res.points["G_crank"])
     A, O2 = np.asarray(res.points["A"][0]), np.asarray(res.points["O2"][0])

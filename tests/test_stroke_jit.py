@@ -57,37 +57,40 @@ def forward_walk_only(mech, us, p, guess):
     """The forward walk alone (``stroke_stages.walk_block`` over the stroke's blocks), the
     statuses at the stroke's points: what ``solve_stroke`` gave before the reverse walk."""
     from jaxmech.continuation import block_layout, block_size, stroke_setup, unblock
-    from jaxmech.stroke_stages import BlockInput, StrokeCarry, WalkState, walk_block
+    from jaxmech.stroke_stages import BlockInput, StrokeCarry, walk_block
 
     us = jnp.asarray(us)[:, None]
     p = {k: jnp.full((1,), v) for k, v in p.items()}
     setup, us_s, g0 = stroke_setup(mech, jm.SolverOptions(), False, us, p, jnp.asarray(guess)[None])
     n, k = us.shape[0], block_size(us.shape[0], jm.SolverOptions().anchors)
     nblk = -(-(n - 1) // k)
-    init = StrokeCarry(g0, jnp.zeros((1, mech.m, 1)), jnp.zeros((1, mech.m, 1, 1)), us_s[:1], WalkState(None, None, None))
+    init = StrokeCarry(g0, jnp.zeros((1, mech.m, 1)), jnp.zeros((1, mech.m, 1, 1)), us_s[:1])
     u_blk = block_layout(us_s, k, nblk)
     nb = u_blk.shape[0]
-    xs = BlockInput(u_blk, None, jnp.zeros(nb, bool), jnp.zeros(nb, bool), jnp.arange(nb) == 0)
+    xs = BlockInput(u_blk, jnp.arange(nb) == 0)
     _, out = jax.lax.scan(functools.partial(walk_block, setup), init, xs)
     return np.asarray(unblock(out.status, 1, k, n))[0]
 
 
-def test_reverse_walk_is_part_of_the_program_and_reaches_what_the_forward_walk_cannot():
+def test_the_repair_is_part_of_the_program_and_reaches_what_the_forward_walk_cannot():
     q_true, cond = sixbar_truth(REENTRY_US, REENTRY_P, REENTRY_SIGNS)
     eager, jitted = eager_and_jit(SIXBAR, REENTRY_US, REENTRY_P, q_true[0])
     assert_bitwise_equal(eager, jitted)
     st = np.asarray(eager.status)
     forward = forward_walk_only(SIXBAR, REENTRY_US, REENTRY_P, q_true[0])
     reached = (st == S.CONVERGED) & (forward != S.CONVERGED)
-    assert np.any(reached), "the forward walk alone reaches every point: this stroke does not test the reverse walk"
-    # what the reverse walk reports is right, as a number and on the requested branch
+    assert np.any(reached), "the forward walk alone reaches every point: this stroke does not test the repair"
+    # what the repair reports is right, as a number and on the requested branch
     exists = np.all(np.isfinite(q_true), axis=-1)
     assert np.all(exists[reached])
     q = np.asarray(eager.q)
-    np.testing.assert_allclose(q[reached], q_true[reached], atol=ACCURACY, rtol=0)
+    err = np.abs(np.angle(np.exp(1j * (q[reached] - q_true[reached]))))
+    assert np.max(err) < ACCURACY
     ok = st == S.CONVERGED
-    assert np.max(np.abs(np.diff(q[:, :4], axis=0))[ok[:-1] & ok[1:]], initial=0) < np.pi
     assert not np.any(ok & ~exists)
+    # right as numbers: neighbours within half a turn, and across each gap the first pose
+    # after it within half a turn of the last one before it (no whole turn added)
+    assert np.max(np.abs(np.diff(q[ok], axis=0)), initial=0) <= np.pi
 
 
 @pytest.mark.parametrize("p, t0, sign", FOURBARS)

@@ -1,21 +1,28 @@
-"""Mass properties of a uniform link from its joints: a bar between two, a plate spanned by
-three or more (the convex hull of the joints, as a lamina of uniform density)."""
+"""Mass properties of a uniform link from its joints: a point mass at one, a slender bar
+between two (or between the farthest of collinear ones), a plate spanned by three or more
+(the convex hull of the joints, as a lamina of uniform density).
+
+The shape (which joints, in which order) is read once from the drawing (``mass_shape``);
+the centre of mass and the inertia are then functions of the joints' positions
+(``shape_properties``, traceable), so they follow the drawing's lengths and angles wherever
+a sweep or a design moves them."""
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["link_mass_properties"]
+__all__ = ["mass_shape", "shape_properties", "link_mass_properties"]
 
 
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull (counter-clockwise) of points ``(n, 2)``: Andrew's monotone chain."""
-    pts = sorted(set(map(tuple, points)))
+def _hull(names, z: np.ndarray) -> list:
+    """The names of the convex hull's corners, counter-clockwise (Andrew's monotone chain)."""
+    pts = sorted({(float(v.real), float(v.imag)): n for n, v in zip(names, z)}.items())
     if len(pts) <= 2:
-        return np.array(pts)
+        return [n for _, n in pts]
 
     def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+        return (a[0][0] - o[0][0]) * (b[0][1] - o[0][1]) - (a[0][1] - o[0][1]) * (b[0][0] - o[0][0])
 
     lower, upper = [], []
     for p in pts:
@@ -26,30 +33,54 @@ def _hull(points: np.ndarray) -> np.ndarray:
         while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
             upper.pop()
         upper.append(p)
-    return np.array(lower[:-1] + upper[:-1])
+    return [n for _, n in lower[:-1] + upper[:-1]]
+
+
+def mass_shape(names, points) -> tuple[str, tuple[str, ...]]:
+    """``(kind, corners)`` of a uniform link through the named `points` (complex, m) at the
+    drawing: ``("point", (a,))``; ``("bar", (a, b))``, the two farthest points where all are
+    collinear; ``("plate", corners)``, the convex hull's corners counter-clockwise."""
+    names = tuple(names)
+    z = np.asarray([complex(p) for p in points], complex)
+    if z.size == 1:
+        return "point", names
+    span = np.abs(z[:, None] - z[None, :])
+    i, j = np.unravel_index(np.argmax(span), span.shape)
+    corners = _hull(names, z)
+    if len(corners) >= 3:
+        zc = np.asarray([z[names.index(n)] for n in corners])
+        area = 0.5 * np.sum(zc.real * np.roll(zc.imag, -1) - np.roll(zc.real, -1) * zc.imag)
+        if abs(area) > 1e-12 * span[i, j] ** 2:
+            return "plate", tuple(corners)
+    return "bar", (names[i], names[j])
+
+
+def shape_properties(kind: str, z, mass):
+    """``(centre of mass (complex, m), inertia about it (kg m^2))`` of a uniform link of
+    `mass` (kg) whose `kind` (``mass_shape``) has its corners at `z` (complex, m, in the
+    shape's order; numpy or traced): ``m L^2 / 12`` for a bar, the polygon's centroid and
+    polar second moment for a plate (a triangle: ``m (a^2 + b^2 + c^2) / 36``)."""
+    z = jnp.stack([jnp.asarray(v) for v in z]) if isinstance(z, (list, tuple)) else jnp.asarray(z)
+    if kind == "point":
+        return z[0], jnp.zeros((), jnp.real(z).dtype) * mass
+    if kind == "bar":
+        return 0.5 * (z[0] + z[1]), mass * jnp.abs(z[1] - z[0]) ** 2 / 12.0
+    x, y = jnp.real(z), jnp.imag(z)
+    x1, y1 = jnp.roll(x, -1), jnp.roll(y, -1)
+    c = x * y1 - x1 * y
+    area = 0.5 * jnp.sum(c)
+    gx = jnp.sum((x + x1) * c) / (6.0 * area)
+    gy = jnp.sum((y + y1) * c) / (6.0 * area)
+    # polar second moment of the polygon about the origin, then about its centroid
+    j_o = jnp.sum(c * (x * x + x * x1 + x1 * x1 + y * y + y * y1 + y1 * y1)) / 12.0
+    j_g = j_o - area * (gx * gx + gy * gy)
+    return gx + 1j * gy, mass * j_g / area
 
 
 def link_mass_properties(points, mass: float) -> tuple[complex, float]:
     """``(centre of mass (complex, m), inertia about it (kg m^2))`` of a uniform link of
-    `mass` (kg) through `points` (complex, m): a point mass for one point; a slender bar
-    between the two farthest points when they are collinear (``m L^2 / 12``); otherwise the
-    uniform plate of their convex hull (a triangle: ``m (a^2 + b^2 + c^2) / 36``)."""
-    z = np.asarray(points, complex)
-    if z.size == 1:
-        return complex(z[0]), 0.0
-    xy = np.stack([z.real, z.imag], axis=1)
-    hull = _hull(xy)
-    x, y = hull[:, 0], hull[:, 1]
-    x1, y1 = np.roll(x, -1), np.roll(y, -1)
-    c = x * y1 - x1 * y
-    area = 0.5 * np.sum(c) if len(hull) >= 3 else 0.0
-    span = np.max(np.abs(z[:, None] - z[None, :]))
-    if len(hull) < 3 or abs(area) <= 1e-12 * span * span:
-        i, j = np.unravel_index(np.argmax(np.abs(z[:, None] - z[None, :])), (z.size, z.size))
-        return complex(0.5 * (z[i] + z[j])), float(mass * abs(z[i] - z[j]) ** 2 / 12.0)
-    gx = np.sum((x + x1) * c) / (6.0 * area)
-    gy = np.sum((y + y1) * c) / (6.0 * area)
-    # polar second moment of the polygon about the origin, then about its centroid
-    j_o = np.sum(c * (x * x + x * x1 + x1 * x1 + y * y + y * y1 + y1 * y1)) / 12.0
-    j_g = j_o - area * (gx * gx + gy * gy)
-    return complex(gx, gy), float(mass * j_g / area)
+    `mass` (kg) through `points` (complex, m): ``shape_properties`` of its ``mass_shape``."""
+    names = [str(k) for k in range(len(points))]
+    kind, corners = mass_shape(names, points)
+    g, j = shape_properties(kind, [complex(points[int(n)]) for n in corners], float(mass))
+    return complex(g), float(j)

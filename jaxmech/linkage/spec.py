@@ -5,6 +5,7 @@ through them, turned into the engine's ``Mechanism`` (loop equations) and ``Mode
 from __future__ import annotations
 
 import cmath
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 
@@ -17,7 +18,7 @@ from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..continuation import solve_stroke
 from ..options import SolverOptions
 from ..units import to_si
-from .mass import link_mass_properties
+from .mass import link_mass_properties, mass_shape
 from .terms import show
 from .topology import GROUND, Built, Topology, build
 
@@ -91,7 +92,12 @@ class Linkage:
     - `mass` ``{link: kg}``; `inertia` ``{link: kg m^2}`` about the centre of mass; `centre`
       ``{link: point or (x, y)}``.  Defaults: a link without mass is massless; a centre of
       mass and an inertia not given are the uniform bar's (two joints: the midpoint and
-      ``m L^2 / 12``) or the uniform plate's spanned by the link's joints.
+      ``m L^2 / 12``) or the uniform plate's spanned by the link's joints, and they are
+      *derived*: functions of the joints' positions, so they follow the link's lengths and
+      angles wherever a sweep or a design changes them (the model has no ``J_<link>`` for
+      a derived inertia, and no centre-of-mass parameters for a derived centre).  A centre
+      or an inertia given here is a parameter of its own (``len_<joint>_G_<link>`` and
+      ``ang_...``, ``J_<link>``) and stays where it is put.
     - `gravity`: ``g`` in m/s^2 pointing down (-y), or a vector ``(gx, gy)``; None: none.
     - `forces`: ``{point: (Fx, Fy)}`` constant forces (N), or ``{point: {"force": (Fx, Fy),
       "on": link}}`` where the point joins several links; `moments`: ``{link: M}`` (N m, CCW).
@@ -142,6 +148,12 @@ class Linkage:
             forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra))
         try:
             self.built: Built = build(self.topology)
+            # the links whose centre of mass and inertia follow from their joints, by the
+            # shape the drawing gives them (build's joints: the points shared by bodies)
+            shapes = self._mass_shapes(self.built.joints)
+            if shapes:
+                self.topology = dataclasses.replace(self.topology, mass_shapes=shapes)
+                self.built = build(self.topology)
         except ValueError as err:  # said in the linkage's own name
             text = str(err)
             raise ValueError(f"{self.name}: {text.removeprefix('linkage: ')}") from None
@@ -264,6 +276,19 @@ class Linkage:
             out[k] = (m, c, J)
         return out
 
+    def _mass_shapes(self, joints) -> tuple:
+        """``Topology.mass_shapes``: for each link without an explicit centre of mass or
+        inertia, the uniform shape through its joints (through its points where it has
+        fewer than two joints) that the drawing gives it (``mass.mass_shape``)."""
+        out = []
+        for link, (_, c, J) in self.mass_spec.items():
+            if c is not None and J is not None:
+                continue
+            names = joints[link] if len(joints[link]) >= 2 else tuple(self.links[link])
+            kind, corners = mass_shape(names, [self.points[x] for x in names])
+            out.append((link, kind, corners, c is None, J is None))
+        return tuple(out)
+
     # ----------------------------------------------------------------- the drawing
     def _drawing_values(self):
         b = self.built
@@ -369,7 +394,10 @@ class Linkage:
             return self.params
         unknown = [k for k in p if k not in self._values]
         if unknown:
-            raise ValueError(f"{self.name}: unknown parameter(s) {unknown}; see Linkage.params")
+            derived = any(k.startswith("J_") or "_G_" in k for k in unknown)
+            hint = ("; a link's centre of mass and inertia follow its joints unless given: pass centre= or inertia= to "
+                    "Linkage for values of your own" if derived else "")
+            raise ValueError(f"{self.name}: unknown parameter(s) {unknown}; see Linkage.params{hint}")
         return {**self._values, **{k: p[k] for k in p}}
 
     def _approach(self, samples: Samples):
@@ -439,6 +467,33 @@ class Linkage:
         u = self._stroke(u, "u")
         samples = check_samples(self.mechanism, Samples(u, 0.0, 0.0, np.full(u.shape[:1], float(t))))
         return self.inverse_dynamics(samples, p=p, quasi_static=True, options=options)
+
+    def mass_properties(self, p: Mapping | None = None) -> dict:
+        """``{link: (mass (kg), centre of mass (complex, m, at the drawing's pose), inertia
+        about it (kg m^2))}`` for the drawing, or for its parameters changed by `p` (the
+        centre then at the drawing's coordinates, the inertia the changed shape's): what the
+        model's bodies use, derived or given (see the class's `mass`)."""
+        from ..actuators import resolve
+
+        values = self._p(p)
+        mech = self.mechanism
+        out = {}
+        for body in self.model.bodies:
+            g = mech.point(body.position, np.asarray(self.guess), np.asarray(self.input_at_drawing), values)
+            out[body.name] = (float(resolve(body.mass, values)), complex(g), float(resolve(body.inertia, values)))
+        return out
+
+    def scene(self, stroke=None, speed: float = 1.0, summary: str | None = None):
+        """This linkage as a ``Scene`` (what ``run_scene``, ``sweep_scene``, ``sweep_dataset``
+        and the design functions take; they also take the linkage itself, as
+        ``linkage.scene()``): its drawing's parameters as defaults, the driven input from
+        ``stroke = (start, end)`` (default: a crank's whole turn from the drawing, an
+        actuator's or slider's drawing value to 1.5 times it) at constant ``speed`` (rad/s
+        or m/s); the table holds every coordinate, the drive's effort and every joint's
+        reaction."""
+        from ..scenes.linkage_scene import linkage_scene
+
+        return linkage_scene(self, stroke, speed, summary)
 
 
 def _drop(result, k: int):

@@ -26,6 +26,7 @@ from collections import deque
 from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
 from ..dynamics.model import Body, Gravity, Model, Moment, PointForce
 from ..mechanism import Mechanism
+from .mass import shape_properties
 from .terms import Term, angle_value, negate, value
 
 __all__ = ["Topology", "Built", "build", "GROUND"]
@@ -61,6 +62,7 @@ class Topology:
     moments: tuple[str, ...] = ()
     loads: tuple = ()
     extra: tuple[str, ...] = ()
+    mass_shapes: tuple = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -329,8 +331,14 @@ def _mechanism(b: _Builder, loops, coords, inputs) -> Mechanism:
     for x in top.points:
         home = min(b.members[x], key=lambda body: _depth(b, body))
         point_terms[x] = b.pos(home, x)
+    shapes = _shapes(b)
+    centres = {}
     for link in b.links:
-        point_terms[f"G_{link}"] = b.pos(link, b._virtual(f"G_{link}", link, ("com",)))
+        if link in shapes and shapes[link][2]:  # the centre of mass follows the joints
+            kind, ring = shapes[link][0], tuple(b.pos(link, x) for x in shapes[link][1])
+            centres[f"G_{link}"] = (kind, ring)
+        else:
+            point_terms[f"G_{link}"] = b.pos(link, b._virtual(f"G_{link}", link, ("com",)))
     loop_terms = tuple(loops)
 
     def constraints(q, u, p):
@@ -340,14 +348,43 @@ def _mechanism(b: _Builder, loops, coords, inputs) -> Mechanism:
     def point(terms):
         return lambda q, u, p: value(terms, values(q, u, p))
 
+    def centre(kind, ring):
+        return lambda q, u, p: shape_properties(kind, [value(t, values(q, u, p)) for t in ring], 1.0)[0]
+
     params = tuple(b.recipes)
     virtual_len = {n for n, r in b.recipes.items() if r[0] == "len" and r[2] in b.virtual}
     lengths = [n for n in params if n.startswith(("len_", "x_", "y_", "R_"))]
     lengths += [n for n in coords + inputs if n.startswith("s_") or n in b.acts]
     signed = [n for n in params if n.startswith(("x_", "y_")) or n in virtual_len]
     return Mechanism(coords=tuple(coords), inputs=tuple(inputs), params=params, lengths=tuple(lengths), signed=tuple(signed),
-                     constraints=constraints if loops else None, points={k: point(v) for k, v in point_terms.items()},
+                     constraints=constraints if loops else None,
+                     points={**{k: point(v) for k, v in point_terms.items()}, **{k: centre(*v) for k, v in centres.items()}},
                      name=top.name)
+
+
+def _shapes(b: _Builder) -> dict:
+    """``{link: (kind, corners, centre derived, inertia derived)}`` (``Topology.mass_shapes``)."""
+    return {link: (kind, corners, c, j) for link, kind, corners, c, j in b.top.mass_shapes}
+
+
+def _inertia(b: _Builder, mech: Mechanism, link: str):
+    """A link's inertia spec: ``J_<link>``, or where it follows from the joints
+    (``Topology.mass_shapes``) ``fn(p)``, the uniform shape's of mass ``m_<link>`` through
+    the joints' positions in the link's own frame (any pose gives them: the positions of
+    one link's points differ by its body-fixed vectors whatever the coordinates)."""
+    shapes = _shapes(b)
+    if link not in shapes or not shapes[link][3]:
+        return f"J_{link}"
+    kind, corners = shapes[link][0], shapes[link][1]
+    ring = tuple(b.pos(link, x) for x in corners)
+    values = _lookup(mech.coords, mech.inputs)
+    rest = dict.fromkeys(mech.coords + mech.inputs, 0.0)
+
+    def inertia(p):
+        look = values(rest, rest, p)
+        return shape_properties(kind, [value(t, look) for t in ring], p[f"m_{link}"])[1]
+
+    return inertia
 
 
 def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
@@ -360,7 +397,7 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
             return th[0][1]
         return lambda q, u, p: angle_value(th, values(q, u, p))
 
-    bodies = [Body(f"G_{link}", f"m_{link}", angle=angle_spec(link), inertia=f"J_{link}", name=link) for link in b.links]
+    bodies = [Body(f"G_{link}", f"m_{link}", angle=angle_spec(link), inertia=_inertia(b, mech, link), name=link) for link in b.links]
     joints = []
     for e in b.edges:
         if e.a in b.acts or e.b in b.acts:
@@ -387,7 +424,8 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
     for link in top.moments:
         loads.append(Moment(angle_spec(link), lambda q, u, p, v, t, link=link: p[f"M_{link}"], name=f"moment on {link}", body=link))
     loads += list(top.loads)
-    own = [f"{k}_{link}" for link in b.links for k in ("m", "J")] + ["g"]
+    derived = {link for link, (_, _, _, j) in _shapes(b).items() if j}
+    own = [f"{k}_{link}" for link in b.links for k in ("m", "J") if k == "m" or link not in derived] + ["g"]
     own += [f"F{c}_{x}" for x, _ in top.forces for c in "xy"] + [f"M_{link}" for link in top.moments]
     own += [n for n in top.extra if n not in own]
     # Every function of the model is written here from the topology (covered by the stored

@@ -20,7 +20,7 @@ from ..units import for_reading
 from .columns import mask_failed, table_columns
 from .evaluation import evaluate
 
-__all__ = ["Scene", "SceneResult", "run_scene"]
+__all__ = ["Scene", "SceneResult", "run_scene", "as_scene"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -174,10 +174,26 @@ class SceneResult:
         return "\n".join(lines)
 
 
+def as_scene(scene, who: str = "scene") -> Scene:
+    """``scene`` as a ``Scene``: a scene, a registered scene's name, or a ``Linkage``
+    (``Linkage.scene()``: a crank's whole turn from the drawing at 1 rad/s); ``ValueError``
+    naming `who` otherwise."""
+    if isinstance(scene, str):
+        from . import get_scene
+
+        return get_scene(scene)
+    if isinstance(scene, Scene):
+        return scene
+    if hasattr(scene, "scene") and hasattr(scene, "mechanism") and callable(scene.scene):
+        return scene.scene()
+    raise ValueError(f"{who}: scene must be a Scene, a scene name or a Linkage, got {type(scene).__name__}")
+
+
 def run_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
     """Run a scene over its stroke at ``points`` evenly spaced inputs (both ends included),
     under its default constant-speed drive.  Raises ``ValueError`` for bad parameters or a
-    design that cannot be assembled over the stroke.
+    design that cannot be assembled over the stroke.  `scene`: a ``Scene``, a registered
+    scene's name or a ``Linkage`` (``as_scene``).
 
     The stroke is solved with ``evaluation.SCENE_OPTIONS`` by ``evaluation.evaluate``, the
     program a sweep runs: ``run_scene`` and a one-design sweep give the same columns, bit
@@ -185,6 +201,7 @@ def run_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
     whose last-bit rounding differs, and a sweep's chunk holds at least two.)"""
     if points < 2:
         raise ValueError(f"points must be at least 2, got {points}")
+    scene = as_scene(scene, "run_scene")
     p = scene.params(**overrides)
     dtype = jnp.result_type(float)
     batch = {k: np.full(2, v, dtype) for k, v in p.items()}

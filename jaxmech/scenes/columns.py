@@ -19,7 +19,7 @@ import jax.numpy as jnp
 
 from ..options import SolverOptions
 from ..status import Status
-from .evaluation import SCENE_OPTIONS, motion_and_outputs, scene_motion
+from .evaluation import SCENE_OPTIONS, outputs_stage, scene_motion, stroke_stage
 from .outputs import output_units
 
 if TYPE_CHECKING:  # a Scene is only read here (its mechanism, units, outputs)
@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # a Scene is only read here (its mechanism, units, outputs)
 
 __all__ = [
     "batch_columns",
+    "part_columns",
     "column_names",
     "design_columns",
     "design_motion",
@@ -108,12 +109,16 @@ def design_columns(scene: Scene, points: int, p, *, options: SolverOptions = SCE
     return {k: v[0] for k, v in cols.items()}, status[0]
 
 
-def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, robust: bool = True):
+def batch_columns(scene: Scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     """The table columns of D designs (``p`` leaves ``(D,)``), traceable: ``({NAME[UNIT]:
-    (D, N)}, status (D, N))``, unmasked (finite placeholders at failed samples), from
-    ``motion_and_outputs``: the sweep kernels' columns, and ``run_scene``'s.  ``robust``:
-    the stroke's robust program (the default) or its straight-line one."""
-    mo, values = motion_and_outputs(scene, points, options, scene.outputs is not None, p, robust)
+    (D, N)}, status (D, N))``, unmasked (finite placeholders at failed samples): the sweep
+    kernels' columns, and ``run_scene``'s."""
+    return part_columns(scene, points, p, stroke_stage(scene, points, options, True, p))
+
+
+def part_columns(scene: Scene, points: int, p, part):
+    """``batch_columns`` from the stroke stage's ``part`` (``evaluation.StrokePart``)."""
+    mo, values = outputs_stage(scene, points, scene.outputs is not None, p, part)
     units = output_units(scene) if values else {}
     return table_columns(scene, mo, {k: (values[k], u) for k, u in units.items()}), mo.status
 

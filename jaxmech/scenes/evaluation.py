@@ -21,9 +21,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from ..continuation import all_converged, straight_then_robust, stroke
-from ..stored import cached_chain
+from ..continuation import all_converged, repair_strokes, repaired_rows, robust_size, stroke
+from ..stored import cached_call, cached_chain
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
 from ..options import SolverOptions
@@ -33,7 +34,7 @@ from ..xla import jit
 from .outputs import run_outputs
 from .outputs import output_units as scene_output_units
 
-__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "scene_outputs", "stroke_stage", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
+__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "scene_outputs", "stroke_stage", "repair_stage", "scene_repair", "repaired_part", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
 
 #: Solver options of a scene's stroke wherever it is evaluated (``run_scene``, sweeps,
 #: design, the live view) unless the caller gives its own: 256 anchors.
@@ -97,10 +98,27 @@ def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, 
         return drive, jnp.linspace(0.0, duration, points), jnp.asarray(scene.guess(p1), dtype)
 
     drive, t, guess = jax.vmap(setup)(p)
-    us = jax.vmap(lambda d, t1: jnp.reshape(jax.vmap(d)(t1), (points, mech.dof)))(drive, t)
+    us = _stroke_inputs(mech, points, drive, t)
     # one compiled pass: positions, dq/du and d2q/du2 (differentiable by the implicit rule)
     sol, e1, e2 = stroke(mech, us, p, guess, options, derivs=True, per_design=True, robust=robust)
     return StrokePart(drive, t, guess, sol, e1, e2)
+
+
+def _stroke_inputs(mech, points: int, drive, t):
+    """Every design's inputs ``(D, points, dof)`` along its stroke: its drive at its times."""
+    return jax.vmap(lambda d, t1: jnp.reshape(jax.vmap(d)(t1), (points, mech.dof)))(drive, t)
+
+
+def scene_repair(scene, points: int, p, part: StrokePart, options: SolverOptions = SCENE_OPTIONS) -> StrokePart:
+    """``part`` (``scene_stroke``'s by the walk alone, ``robust=False``) with the points the
+    walk did not solve repaired (``continuation.repair_strokes``): what ``scene_stroke``
+    gives with its repair, as a stage of its own that runs only for the designs that need
+    it (``evaluate`` and the sweep kernels gather them)."""
+    mech = scene.mechanism
+    p, _ = _as_dtype(scene, p)
+    us = _stroke_inputs(mech, points, part.drive, part.t)
+    sol, e1, e2 = repair_strokes(mech, us, p, part.guess, options, (part.solution, part.dq_du, part.d2q_du2))
+    return part._replace(solution=sol, dq_du=e1, d2q_du2=e2)
 
 
 def scene_kinematics(scene, points: int, p, part: StrokePart):
@@ -152,9 +170,33 @@ def scene_outputs(scene, p, mo: Motion) -> dict:
 @functools.partial(jit, static_argnums=(0, 1, 2, 3))
 def stroke_stage(scene, points: int, options: SolverOptions, robust: bool, p):
     """``scene_stroke`` as a program of its own: the first of the two a scene's evaluation
-    runs (``motion_and_outputs``); ``robust``: the stroke's robust program or its
-    straight-line one (``continuation.straight_then_robust`` runs them)."""
+    runs (``motion_and_outputs``); ``robust``: the walk with its repair in one program, or
+    the walk alone (``evaluate`` and the sweep kernels, which run ``repair_stage`` for the
+    designs that need it)."""
     return scene_stroke(scene, points, p, options, robust)
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2))
+def repair_stage(scene, points: int, options: SolverOptions, p, part):
+    """``scene_repair`` as a program of its own (``p`` and ``part`` of the designs that need
+    it)."""
+    return scene_repair(scene, points, p, part, options)
+
+
+def repaired_part(part: StrokePart, p, repair_rows, size: int | None = None) -> StrokePart:
+    """``part`` with the designs where a sample failed taken from ``repair_rows(p_rows,
+    part_rows)`` (the repair stage, compiled for ``size`` designs: they are gathered in
+    batches of that many, ``continuation.repaired_rows``); ``part`` itself where every
+    sample converged."""
+    passed = all_converged(part.solution.status)
+    if np.all(passed):
+        return part
+    host_p = {k: np.asarray(v) for k, v in p.items()}
+
+    def rows(idx):
+        return repair_rows({k: v[idx] for k, v in host_p.items()}, jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], part))
+
+    return repaired_rows(part, passed, rows, size or robust_size(passed.size))
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2))
@@ -187,24 +229,25 @@ def output_units(scene, points: int | None = None, options: SolverOptions | None
 
 def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     """``(motion, outputs)`` of D designs with concrete parameters ``p`` (``{name: (D,)}``):
-    ``stroke_stage`` then ``outputs_stage``, compiled at once where they must be
-    (``stored.cached_chain``).  Outputs that do not trace (``scene.outputs`` converting values
-    to numpy; ``outputs.run_outputs`` tells) are evaluated design by design on the host
-    instead: ``outputs`` is then ``None`` and the caller evaluates them."""
+    ``stroke_stage`` (the walk) then ``outputs_stage``, compiled at once where they must be
+    (``stored.cached_chain``), and, for the designs where a sample failed, ``repair_stage``
+    between the two (the rule of every concrete stroke, the sweep kernels' too).  Outputs
+    that do not trace (``scene.outputs`` converting values to numpy;
+    ``outputs.run_outputs`` tells) are evaluated design by design on the host instead:
+    ``outputs`` is then ``None`` and the caller evaluates them."""
     mode = {}
+    static2 = lambda traced: (scene, int(points), traced)  # noqa: E731
 
-    def attempt(robust: bool):
-        def run(traced: bool):
-            first = (stroke_stage, (scene, int(points), options, robust), (p,))
-            mode["traced"] = traced
-            return cached_chain(*first, outputs_stage, (scene, int(points), traced), lambda part: (p, part))
+    def run(traced: bool):
+        mode["traced"] = traced
+        first = (stroke_stage, (scene, int(points), options, False), (p,))
+        return cached_chain(*first, outputs_stage, static2(traced), lambda part: (p, part), with_first=True)
 
-        return run_outputs(scene, run)
-
-    # the stroke's straight-line program, its robust one for the designs where a sample
-    # failed (the rule of every concrete stroke, the sweep kernels' too)
-    mo, values = straight_then_robust(attempt, lambda res: all_converged(res[0].status))
+    part, (mo, values) = run_outputs(scene, run)
     traced = mode["traced"]
+    repaired = repaired_part(part, p, lambda p_, part_: cached_call(repair_stage, (scene, int(points), options), (p_, part_)))
+    if repaired is not part:
+        mo, values = cached_call(outputs_stage, static2(traced), (p, repaired))
     if not traced:
         return mo, None
     return mo, {k: (values[k], unit) for k, unit in scene_output_units(scene).items()}

@@ -18,13 +18,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..continuation import all_converged, straight_then_robust
+from ..continuation import robust_size
 from ..scenes.base import Scene
 from ..options import SolverOptions
 from ..status import Status
 from .designs import reject
-from ..scenes.columns import batch_columns, mask_failed, table_columns
-from ..scenes.evaluation import motion_and_outputs, outputs_stage, scene_motion, stroke_stage
+from ..scenes.columns import mask_failed, part_columns, table_columns
+from ..scenes.evaluation import outputs_stage, repair_stage, repaired_part, scene_kinematics, scene_motion, stroke_stage
 from ..scenes.outputs import output_units, run_outputs
 from ..xla import jit
 from .evaluate import Figures, figure_names, stroke_figures
@@ -71,22 +71,31 @@ class ChunkData:
         return int(self.status.shape[0])
 
 
-def _chunk(scene: Scene, job: Job, p, robust: bool = True):
-    """A chunk of designs (``p`` leaves ``(chunk,)``), as one traced function.  Trace mode:
-    ``motion_and_outputs`` (the compiled kernel is its two programs, ``_TwoStage``, which
-    ``run_scene`` runs: the columns are cut from them on the host, so a design's columns are
-    ``run_scene``'s bit for bit; this fused form serves shape and outputs checks); figures
-    mode: the figures ``(chunk,)`` and the status, reduced in the kernel; the motion alone
-    where outputs are per design.  ``robust``: the stroke's robust program or its
-    straight-line one (``_StraightFirst`` runs both as ``run_scene`` does)."""
+def _rest(scene: Scene, job: Job):
+    """``(p, part) -> outputs``: a chunk kernel's second program, from the stroke stage's
+    ``part`` (``scenes.evaluation.StrokePart``).  Trace mode: ``outputs_stage`` (what
+    ``run_scene`` runs: a design's columns are cut from it on the host, so they are
+    ``run_scene``'s bit for bit); figures mode: the figures ``(chunk,)`` and the status,
+    reduced in the kernel; the motion alone where the outputs are per design."""
     if job.outputs != "vmap":
-        return scene_motion(scene, job.points, p, job.options, robust)[0]
+        return lambda p, part: scene_kinematics(scene, job.points, p, part)[0]
     if job.figures is None:
-        return motion_and_outputs(scene, job.points, job.options, scene.outputs is not None, p, robust)
-    cols, status = batch_columns(scene, job.points, p, job.options, robust)
-    figs = jax.vmap(lambda c, s, p1: stroke_figures(scene, job.figures, c, s, p1))(cols, status, p)
-    status = figs.pop("status[-]")
-    return figs, status
+        with_outputs = scene.outputs is not None
+        return lambda p, part: outputs_stage(scene, job.points, with_outputs, p, part)
+
+    def figures(p, part):
+        cols, status = part_columns(scene, job.points, p, part)
+        figs = jax.vmap(lambda c, s, p1: stroke_figures(scene, job.figures, c, s, p1))(cols, status, p)
+        status = figs.pop("status[-]")
+        return figs, status
+
+    return figures
+
+
+def _chunk(scene: Scene, job: Job, p):
+    """A chunk of designs (``p`` leaves ``(chunk,)``) as one traced function: the stroke
+    (the walk and its repair) then ``_rest``; for shape and outputs checks."""
+    return _rest(scene, job)(p, stroke_stage(scene, job.points, job.options, True, p))
 
 
 def _trace_columns(scene: Scene, job: Job, mo, values, p) -> tuple[dict, np.ndarray]:
@@ -138,69 +147,53 @@ _COMPILED: dict = {}  # (scene, job, devices, x64, names) -> compiled
 _PER_DESIGN: dict = {}  # (scene, job without chunk, devices, x64) -> bytes per design
 
 
-class _TwoStage:
-    """The trace-mode kernel: ``stroke_stage`` then ``outputs_stage``, the two programs
-    ``run_scene`` runs (so a design's columns are ``run_scene``'s bit for bit), compiled at
-    once (the first on a thread of its own)."""
+class _Staged:
+    """A chunk kernel as ``run_scene`` runs a scene (``scenes.evaluation.evaluate``): the
+    stroke's walk (``stroke_stage``) for the chunk, its repair (``repair_stage``) for the
+    designs where a sample failed, gathered ``robust_size(chunk)`` at a time and compiled
+    the first time one does, and the rest (``_rest``) for the chunk.  The walk and the rest
+    are compiled at once (the first on a thread of its own)."""
 
-    def __init__(self, scene: Scene, job: Job, spec: dict, sharding, robust: bool = True):
-        with_outputs = scene.outputs is not None
-        first = jit(lambda p: stroke_stage(scene, job.points, job.options, robust, p), in_shardings=(sharding,), out_shardings=sharding)
+    def __init__(self, scene: Scene, job: Job, spec: dict, sharding):
+        self.scene, self.job, self.sharding = scene, job, sharding
+        first = jit(lambda p: stroke_stage(scene, job.points, job.options, False, p), in_shardings=(sharding,), out_shardings=sharding)
         lowered = first.lower(spec)
         # XLA releases the GIL while it compiles: the second program is traced meanwhile
         with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
             compiling = pool.submit(lowered.compile)
+            self.part_info = lowered.out_info
             part = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), lowered.out_info)
-            second = jit(lambda p, part: outputs_stage(scene, job.points, with_outputs, p, part),
-                         in_shardings=(sharding, sharding), out_shardings=sharding)  # fmt: skip
+            second = jit(_rest(scene, job), in_shardings=(sharding, sharding), out_shardings=sharding)
             self.second = second.lower(spec, part).compile()
         self.first = compiling.result()
+        self.size = round_up(robust_size(job.chunk), jax.device_count())
+        self._repair = None
+
+    def _put(self, tree):
+        return jax.tree_util.tree_map(lambda x: jax.device_put(x, self.sharding), tree)
+
+    def _repair_rows(self, p, part):
+        """The repair stage for ``self.size`` designs (host rows of ``p`` and ``part``)."""
+        if self._repair is None:
+            job, size, sh = self.job, self.size, self.sharding
+            spec = lambda x: jax.ShapeDtypeStruct((size,) + tuple(x.shape[1:]), x.dtype, sharding=sh)  # noqa: E731
+            fn = jit(lambda p_, part_: repair_stage(self.scene, job.points, job.options, p_, part_), in_shardings=(sh, sh), out_shardings=sh)
+            self._repair = fn.lower({k: spec(v) for k, v in p.items()}, jax.tree_util.tree_map(spec, self.part_info)).compile()
+        return self._repair(self._put(p), self._put(part))
 
     def __call__(self, p):
-        return self.second(p, self.first(p))
+        part = repaired_part(self.first(p), p, self._repair_rows, self.size)
+        return self.second(p, self._put(part))
 
     def memory_analysis(self):
-        """Both programs' arguments, outputs and temporaries (the second's arguments are the
-        first's outputs and the parameters, counted once)."""
+        """The walk's and the rest's arguments, outputs and temporaries (the second's
+        arguments are the first's outputs and the parameters, counted once)."""
         a, b = self.first.memory_analysis(), self.second.memory_analysis()
         return types.SimpleNamespace(
             argument_size_in_bytes=a.argument_size_in_bytes,
             output_size_in_bytes=a.output_size_in_bytes + b.output_size_in_bytes,
             temp_size_in_bytes=max(a.temp_size_in_bytes, b.temp_size_in_bytes),
         )
-
-
-class _StraightFirst:
-    """A chunk kernel as ``run_scene`` runs a scene (``continuation.straight_then_robust``):
-    the program with the stroke's straight-line program, and the one with its robust
-    program, compiled the first time a design fails the first, for the designs that did.
-    Memory is the first program's (the chunk budget's estimate)."""
-
-    def __init__(self, build, passed_of):
-        self._build, self._passed_of = build, passed_of
-        self.straight, self._robust = build(False), None
-
-    def _run(self, p, robust: bool):
-        if not robust:
-            return self.straight(p)
-        if self._robust is None:
-            self._robust = self._build(True)
-        return self._robust(p)
-
-    def __call__(self, p):
-        return straight_then_robust(lambda robust: self._run(p, robust), self._passed_of)
-
-    def memory_analysis(self):
-        return self.straight.memory_analysis()
-
-
-def _passed(job: Job):
-    """Per design of a chunk kernel's output, whether its whole stroke converged."""
-    if job.outputs == "vmap" and job.figures is not None:
-        return lambda out: np.asarray(out[1]) == Status.CONVERGED  # the designs' statuses
-    if job.outputs == "vmap":
-        return lambda out: all_converged(out[0].status)
-    return lambda out: all_converged(out.status)
 
 
 def compiled_kernel(scene: Scene, job: Job, param_names):
@@ -212,14 +205,7 @@ def compiled_kernel(scene: Scene, job: Job, param_names):
         return hit, sharding
     dtype = jnp.result_type(float)
     spec = {k: jax.ShapeDtypeStruct((job.chunk,), dtype, sharding=sharding) for k in param_names}
-
-    def build(robust: bool):
-        if job.outputs == "vmap" and job.figures is None:
-            return _TwoStage(scene, job, spec, sharding, robust)
-        jitted = jit(lambda p: _chunk(scene, job, p, robust), in_shardings=(sharding,), out_shardings=sharding)
-        return jitted.lower(spec).compile()
-
-    compiled = _StraightFirst(build, _passed(job))
+    compiled = _Staged(scene, job, spec, sharding)
     if len(_COMPILED) > 32:
         _COMPILED.clear()
     _COMPILED[key] = compiled

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..scenes.base import Scene
+from ..scenes.base import Scene, as_scene
 from ..options import SolverOptions
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..status import Status
@@ -112,12 +112,7 @@ def _dask_job(client, scene, job, names, d, chunk_size, budget):
 
 
 def _prepare(scene, points, chunk_size, memory_budget, who):
-    if isinstance(scene, str):
-        from ..scenes import get_scene
-
-        scene = get_scene(scene)
-    if not isinstance(scene, Scene):
-        raise ValueError(f"{who}: scene must be a Scene or a scene name, got {type(scene).__name__}")
+    scene = as_scene(scene, who)
     if points < 2:
         raise ValueError(f"{who}: points must be at least 2, got {points}")
     if chunk_size is not None and chunk_size < 1:
@@ -356,7 +351,7 @@ def sweep_scene(
 
     **Arguments**
 
-    - `scene`: a ``Scene`` or a registered scene name.
+    - `scene`: a ``Scene``, a registered scene name or a ``Linkage`` (``Linkage.scene()``).
     - `grid`: ``{name: 1-D values}``, a full-factorial grid (see ``grid``); parameters not
       named keep the scene's defaults (SI units).
     - `table`: ``{name: (D,) values}``, an explicit list of designs (e.g. ``random_designs``).
