@@ -1,14 +1,13 @@
-"""Strokes by continuation: blocks walked by one scan, a guarded predictor, gaps, a
-reverse walk, and the public ``solve_stroke``.
+"""Strokes by continuation: blocks walked by one scan, a guarded predictor, gaps and their
+repair, and the public ``solve_stroke``.
 
 A stroke ``us (N, dof)`` is cut into blocks of ``k`` consecutive points.  A ``lax.scan``
 walks the blocks in order (``stroke_stages.walk_block``); the last point of each solved
 block is the *anchor* of the next: its root ``q`` and the implicit derivatives ``dq/du``,
 ``d2q/du2`` there give every point of the next block a second-order predicted guess
 (``stroke_point.predict``), and checked Newton steps solve the whole block at once
-(vectorised over its points and over the designs); points that fail them are solved by the
-robust kernel (``stroke_point.assemble``).  A block whose guesses are good (a smooth
-stroke) takes one Newton step per point.
+(vectorised over its points and over the designs).  A block whose guesses are good (a
+smooth stroke) takes one Newton step per point.
 
 Gaps (stretches where the mechanism cannot be assembled): an anchor that failed is never
 used.  The last trusted anchor is kept, and once a block ends in failure its derivatives
@@ -48,14 +47,14 @@ from .newton import coord_scales
 from .options import SolverOptions
 from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
-from .stroke_point import assemble, checked_step, predict
+from .stroke_point import checked_step, predict
 from .stroke_attach import Walked, attach, eager_attach
 from .stroke_repair import repair
 from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
 from .xla import jit, unfused
 
-__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "repaired_rows", "robust_size",
-           "repair_stroke", "repair_strokes", "all_converged", "predict", "bucket", "assemble", "checked_step"]
+__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "repaired_rows", "take_rows", "robust_size",
+           "repair_stroke", "repair_strokes", "all_converged", "predict", "bucket", "checked_step"]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -221,11 +220,11 @@ def all_converged(status) -> np.ndarray:
 
 def robust_size(d: int) -> int:
     """How many designs one call of a repair program takes for a batch of ``d``: all of a
-    small batch, else a quarter of it (a power of two, at least 8), so the repair compiles
-    once per batch size and costs what the failed designs need."""
+    small batch, else a sixteenth of it (a power of two, at least 8), so the repair
+    compiles once per batch size and costs about what the failed designs need."""
     if d <= 8:
         return d
-    return min(d, max(8, 1 << (d // 4 - 1).bit_length()))
+    return min(d, max(8, 1 << (d // 16 - 1).bit_length()))
 
 
 def _per_design(passed: np.ndarray, straight, robust):
@@ -241,22 +240,33 @@ def _per_design(passed: np.ndarray, straight, robust):
     return jax.tree_util.tree_map(pick, straight, robust)
 
 
+@jax.jit
+def take_rows(tree, idx):
+    """Every leaf of ``tree`` (design axis first) at the designs ``idx``, on the device."""
+    return jax.tree_util.tree_map(lambda x: jnp.take(x, idx, axis=0), tree)
+
+
+@jax.jit
+def _put_rows(tree, idx, rows):
+    """``tree`` with the designs ``idx`` (out of range: dropped) replaced by ``rows``."""
+    return jax.tree_util.tree_map(lambda x, r: x.at[idx].set(r, mode="drop"), tree, rows)
+
+
 def repaired_rows(straight, passed: np.ndarray, repair_rows, size: int):
     """``straight`` (design axis first) with the rows of the designs that did not pass
     replaced by ``repair_rows(idx)``'s (``idx``: ``size`` design indices, the failed ones in
-    order, padded by repeating the first), as device arrays."""
+    order, padded with a design that passed (nothing to repair: it costs nothing), else
+    the first failed one).  Gathered and scattered on the device: no host copies."""
     failed = np.flatnonzero(~passed)
-    out = jax.tree_util.tree_map(np.array, straight)  # writable host copies
+    good = np.flatnonzero(passed)
+    out = straight
     for start in range(0, failed.size, size):
         part = failed[start : start + size]
-        idx = np.concatenate([part, np.full(size - part.size, part[0])])
-        res = repair_rows(idx)
-
-        def put(o, r, part=part):
-            o[part] = np.asarray(r)[: part.size]
-
-        jax.tree_util.tree_map(put, out, res)
-    return jax.tree_util.tree_map(jax.device_put, out)
+        pad = size - part.size
+        idx = np.concatenate([part, np.full(pad, good[0] if good.size else part[0])]).astype(np.int32)
+        put = np.concatenate([part, np.full(pad, passed.size)]).astype(np.int32)  # padding rows are dropped
+        out = _put_rows(out, put, repair_rows(idx))
+    return out
 
 
 def straight_then_robust(run, passed_of, repair_rows=None, size: int | None = None):
@@ -274,10 +284,6 @@ def straight_then_robust(run, passed_of, repair_rows=None, size: int | None = No
     if repair_rows is None or passed.ndim == 0:
         return _per_design(passed, straight, run(True))
     return repaired_rows(straight, passed, lambda idx: repair_rows(idx, straight), size or robust_size(passed.size))
-
-
-def _rows(tree, idx):
-    return jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], tree)
 
 
 def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, derivs: bool, per_design: bool = False,
@@ -349,8 +355,8 @@ def _concrete(mech, options, derivs, single, per_design, us_, pf, gf, n_):
         return all_converged(np.asarray(o[0].status)[..., :n])
 
     def repair_rows(idx, straight):
-        us_i = us_[idx] if per_design else us_
-        return _repair_program(mech, options, derivs, us_i, {k: v[idx] for k, v in pf.items()}, gf[idx], n_, _rows(straight, idx))
+        p_i, g_i, walked = take_rows((pf, gf, straight), idx)
+        return _repair_program(mech, options, derivs, take_rows(us_, idx) if per_design else us_, p_i, g_i, n_, walked)
 
     if single:
         straight = _stroke_program(mech, options, derivs, True, False, us_, pf, gf, n_)

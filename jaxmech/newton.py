@@ -227,7 +227,8 @@ def newton_status(pb: NewtonProblem, st: NewtonState, inputs_ok, cond_max):
     return q, status, cond
 
 
-def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None, skip=None, inputs_finite: bool = False) -> NewtonResult:
+def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None, skip=None, inputs_finite: bool = False,
+           budget=None) -> NewtonResult:
     """Damped Newton / Levenberg-Marquardt for one sample (no gradients): the one kernel that
     serves single solves, stroke anchors and every stroke point.
 
@@ -244,8 +245,8 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     found across is ``BRANCH``, none found ``INFEASIBLE``.  A guess off the requested branch
     may move freely until it reaches it.
 
-    ``max_step`` (may be traced) overrides ``opts.max_step``; ``skip`` (traced bool) runs no
-    iteration at all (under ``vmap``, a lane whose answer is not wanted then costs nothing).
+    ``max_step`` (may be traced) overrides ``opts.max_step``, ``budget`` (may be traced)
+    ``opts.max_iterations``; ``skip`` (traced bool) runs no iteration at all (under ``vmap``, a lane whose answer is not wanted then costs nothing).
     ``inputs_finite``: the caller has replaced non-finite inputs and parameters already (a
     stroke does, once per design), so only the guess is checked here.  A check of every
     parameter is a chain of ``is-finite`` tests that XLA's CPU fusion copies into each
@@ -273,7 +274,8 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
         dz=jnp.zeros((m,), dtype), size=zero, mu=zero, slow=jnp.zeros((), jnp.int32), done=~inputs_ok if skip is None else ~inputs_ok | skip,
         stalled=jnp.asarray(False), guard=jnp.asarray(True), crossed=jnp.asarray(False), on=jnp.asarray(False),
     )
-    st = jax.lax.while_loop(lambda st: (~st.done) & (st.k < opts.max_iterations + 1), functools.partial(newton_iteration, pb), per_lane(init, inputs_ok))
+    budget = opts.max_iterations if budget is None else budget
+    st = jax.lax.while_loop(lambda st: (~st.done) & (st.k < budget + 1), functools.partial(newton_iteration, pb), per_lane(init, inputs_ok))
     q, status, cond = newton_status(pb, st, inputs_ok, cond_max)
     if branched:
         # The blocks' determinants from the Jacobian of the last evaluated iterate (at most

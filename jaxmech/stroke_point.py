@@ -24,7 +24,7 @@ from .status import Status
 from .structure import blocks
 from .xla import unfused
 
-__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "assemble", "multistart", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
+__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "multistart", "fresh_starts", "score", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 
 
 # --------------------------------------------------------------------------- predictor
@@ -205,7 +205,7 @@ def score(status):
 
 
 def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, target, inputs_finite: bool = False,
-               skip=None, branch0=None) -> tuple[NewtonResult, jax.Array]:
+               skip=None, after_stall=None, budget=None) -> tuple[NewtonResult, jax.Array]:
     """``newton.newton`` from ``starts[j]`` (``(S, m)``) with the step cap ``caps[j]``, for
     ``j = 0 .. count - 1`` (``count`` may be traced) one after another until a root on the
     requested branch (``target``) is found.  One call site of the kernel, in a
@@ -213,63 +213,50 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
     and finished lanes skip the later starts.  The best answer is kept: a root on the
     branch, else one that exists only on another branch (``BRANCH`` says more than a
     stall), else the first start's own status; the earliest start wins a tie.  ``skip``
-    (traced bool): no start is run (the lane's answer is not wanted).  ``branch0``: the
-    branch indicator at ``starts[0]`` where the caller has it (the result's where no start
-    ran).  Returns ``(best NewtonResult, index of its start)``."""
+    (traced bool): no start is run (the lane's answer is not wanted).  ``after_stall``
+    (``(S,)`` bools): start ``j`` is run only where start ``j - 1`` did not stall
+    (``INFEASIBLE``: a least-squares minimum above tolerance, which a shorter step from the
+    same pose reaches again).  ``budget``: each start's iterations (``newton.newton``'s).
+    Returns ``(best NewtonResult, index of its start)``."""
     dtype = starts.dtype
     last = starts.shape[0] - 1
-    if branch0 is None:
-        branch0 = branch_value(mech, starts[0], u, p) if has_branch(mech) else jnp.asarray(jnp.nan, dtype)
+    after = jnp.zeros((last + 1,), bool) if after_stall is None else jnp.asarray(after_stall)
 
     def wanted(carry):
-        j, _, best_score, _ = carry
+        j, _, best_score, _, _ = carry
         return (j < count) & (best_score < 2)
 
     def attempt(carry):
-        j, best, best_score, j_best = carry
+        j, best, best_score, j_best, stalled = carry
         k = jnp.clip(j, 0, last)
-        res = newton(mech, opts, u, p, starts[k], target, caps[k].astype(dtype), skip=~wanted(carry), inputs_finite=inputs_finite)
-        take = wanted(carry) & (score(res.status) > best_score)
+        run = wanted(carry) & ~(after[k] & stalled)
+        res = newton(mech, opts, u, p, starts[k], target, caps[k].astype(dtype), skip=~run, inputs_finite=inputs_finite, budget=budget)
+        take = run & (score(res.status) > best_score)
         pick = lambda a, b: where(take, a, b)  # noqa: E731
-        return j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score), pick(k, j_best)
+        stalled = where(run, res.status == Status.INFEASIBLE, stalled)
+        return j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score), pick(k, j_best), stalled
 
     zero = jnp.zeros((), dtype)
+    branch0 = branch_value(mech, starts[0], u, p) if has_branch(mech) else jnp.asarray(jnp.nan, dtype)
     none = NewtonResult(starts[0], jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
                         branch0, jnp.zeros((), jnp.int32))
     first = jnp.asarray(-1) if skip is None else where(skip, 2, -1)
-    init = per_lane((jnp.zeros((), jnp.int32), none, first, jnp.zeros((), jnp.int32)), jnp.all(jnp.isfinite(starts[0])))
-    _, best, _, j_best = jax.lax.while_loop(wanted, attempt, init)
+    init = (jnp.zeros((), jnp.int32), none, first, jnp.zeros((), jnp.int32), jnp.asarray(False))
+    _, best, _, j_best, _ = jax.lax.while_loop(wanted, attempt, per_lane(init, jnp.all(jnp.isfinite(starts[0]))))
     return best, j_best
 
 
-def assemble(mech: Mechanism, opts: SolverOptions, u, p, guess, ref, target, inputs_finite: bool = False, jac_guess=None,
-             skip=None) -> NewtonResult:
-    """A pose on the requested branch (``target``: signs of the branch indicator) at ``u``,
-    from a guess and a reference pose ``ref`` (the last trusted pose of a stroke).
-
-    ``multistart`` from the guess (the reference pose itself where the guess is off the
-    branch), the guess again with a tenth of the step cap (which keeps Newton on the near
-    side of a fold, a toggle the stroke re-enters at, where full steps overshoot), then
-    ``STARTS`` fixed offsets around ``ref``: the fresh assembly a stroke needs at its first
-    point and after a gap, where no pose near the last trusted one exists to continue from.
-    Angles are then moved by whole turns to lie within half a turn of the guess (where the
-    equations allow it: checked on the residual), so a stroke's angles are continuous as
-    numbers.
-
-    ``inputs_finite``: as for ``newton`` (the stroke program sanitises its inputs once).
-    ``jac_guess``: the constraint Jacobian at the guess (any positive scaling), where the
-    caller has it (the checked step): the guess's block determinants are read from it.
-    ``skip``: as ``multistart``'s.  Returns the best start's ``newton.NewtonResult`` (``q``
-    moved by the whole turns).
-    """
-    dtype = guess.dtype
+def fresh_starts(mech: Mechanism, opts: SolverOptions, ref, p) -> tuple[jax.Array, jax.Array]:
+    """``(starts (STARTS + 2, m), caps (STARTS + 2,))``: a fresh assembly's starts for
+    ``multistart`` around the pose ``ref``: ``ref`` itself, ``ref`` with a tenth of the step
+    cap (which keeps Newton on the near side of a fold, a toggle a stroke re-enters at,
+    where full steps overshoot), then ``STARTS`` fixed offsets (half-turns for angles,
+    length scales for lengths): the assembly a stroke needs at its first point and after a
+    gap, where no pose near the last trusted one exists to continue from."""
+    dtype = ref.dtype
     s = coord_scales(mech, p, dtype)
     angle = ~jnp.asarray(mech.coord_is_length())
-    b_guess = branch_value(mech, guess, u, p, jac_guess)
-    g0 = where(on_branch(target, b_guess), guess, ref) if has_branch(mech) else guess
     table = ref[None] + jnp.asarray(start_offsets(mech.m), dtype) * where(angle, jnp.pi, s)
-    starts = jnp.concatenate([g0[None], g0[None], table])
     caps = np.full(STARTS + 2, opts.max_step)
     caps[1] = 0.1 * opts.max_step
-    best, _ = multistart(mech, opts, u, p, starts, jnp.asarray(caps, dtype), STARTS + 2, target, inputs_finite, skip, b_guess)
-    return best._replace(q=whole_turns(mech, opts, best.q, guess, u, p, best.status == Status.CONVERGED, best.residual))
+    return jnp.concatenate([ref[None], ref[None], table]), jnp.asarray(caps, dtype)

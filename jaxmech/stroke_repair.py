@@ -4,35 +4,36 @@ again with bounded work, batched over every failed point of every design at once
 The straight-line walk (``stroke_stages.walk_block``) solves a stroke forward by checked
 Newton steps from a predicted guess; a point those steps do not bring home stays failed,
 and so do the points after it (the anchor stays at the last trusted pose, without its
-series).  ``repair`` takes those failures in rounds of three stages, none of whose loops
-is set by one design for a whole batch:
+series).  ``repair`` takes those failures in rounds; every Newton solve of a round is one
+call of one kernel (``solve_points``: ``stroke_point.multistart`` over the points to solve,
+gathered in groups of ``GROUP`` points per design, as many groups as there are points), so
+no loop's trip count is set by one design for a whole batch, and the program holds one copy
+of the Newton kernel:
 
-1. **Probes** (``probe``): a fresh assembly (``stroke_point.assemble``: the guess, the
-   guess with a tenth of the step cap, then ``STARTS`` fixed offsets around it) at up to
-   two points a design, from the nearest converged pose before the point (else the
-   design's guess).  The first round probes each failed end of the stroke (point 0, the
-   last point); later rounds the middle of a run of points where the loop closes only on
-   another branch (``BRANCH``: an assemblable stretch the walk never reached, between two
-   gaps).
-2. **Fills** (``fill``): from each converged probe, continuation in both directions along
-   the failed points, one checked step a point (up to ``FRESH_STEPS`` plain Newton steps
-   from a secant prediction), each fill stopping at its first failure.  This re-enters a
+1. **Fresh assemblies** (``FRESH``: from the nearest converged pose before the point, else
+   the design's guess; the same pose with a tenth of the step cap; then
+   ``stroke_point.STARTS`` fixed offsets around it).  The first round assembles each failed
+   end of the stroke (point 0, the last point); later rounds every point where the loop
+   closes only on another branch (``BRANCH``: an assemblable stretch the walk never
+   reached, between two gaps).
+2. **Fills** (``fill``, first round): from each end assembled, continuation along the failed
+   points towards the converged ones, one checked step a point (up to ``FRESH_STEPS`` plain
+   Newton steps from a secant prediction), stopping at the first failure.  This re-enters a
    gap from its far side, where the requested branch's poses are easy to reach (a stroke
    re-enters the assemblable range at a toggle, which the walk's side cannot cross).
-3. **Two-sided solves** (``two_sided``): every point still failed whose nearest converged
-   neighbours changed, solved on its own by ``stroke_point.multistart`` from the nearest
-   converged pose before it and the nearest after it, each at the full and a tenth of the
-   step cap: at most four Newton solves a point, for all such points of all designs in
-   groups of ``GROUP`` points per design, so a gap's points cost a few solves each and
-   never hold the batch for more.
+3. **Two-sided solves** (``TWO_SIDED``): every point still failed whose nearest converged
+   neighbours changed, from the nearest converged pose before it and the nearest after it,
+   each at the full step cap and, where that one did not stall (``INFEASIBLE``), at a tenth
+   of it: two to four Newton solves a point.
 
-Rounds go on (at most ``ROUNDS``) while some design has a ``BRANCH`` run not probed yet.
-Angles stay continuous as numbers (``unwrap``): each repaired pose is moved by whole turns,
-in stroke order, to within half a turn of the converged pose before it (else of the
-guess), so a stretch re-entered after a gap starts within half a turn of the last pose
-before the gap, as a walk would give.  Every reported pose passed the kernel's tests on
-the requested branch.  Shapes: ``D`` designs, ``nb`` (bucketed) stroke
-points, the first ``n`` of them the stroke, ``m`` coordinates, ``dof`` inputs.
+A point solved before keeps the better answer (``stroke_point.score``).  Rounds go on (at
+most ``ROUNDS``) while some design has a ``BRANCH`` point not assembled afresh yet.  Angles
+stay continuous as numbers (``unwrap``): each repaired pose is moved by whole turns, in
+stroke order, to within half a turn of the converged pose before it (else of the guess), so
+a stretch re-entered after a gap starts within half a turn of the last pose before the gap.
+Every reported pose passed the kernel's tests on the requested branch.  Shapes: ``D``
+designs, ``nb`` (bucketed) stroke points, the first ``n`` of them the stroke, ``m``
+coordinates, ``dof`` inputs.
 """
 
 from __future__ import annotations
@@ -45,19 +46,25 @@ import jax.numpy as jnp
 from .linalg import where
 from .newton import NewtonResult
 from .status import Status
-from .stroke_point import FRESH_STEPS, assemble, checked_step, multistart, score, whole_turns
+from .stroke_point import STARTS, fresh_starts, multistart, score, whole_turns
 from .stroke_stages import PointResults, StrokeSetup, point_derivatives
 
-__all__ = ["repair", "GROUP", "ROUNDS", "PROBES"]
+__all__ = ["repair", "GROUP", "ROUNDS", "FRESH", "TWO_SIDED", "CONTINUE"]
 
-#: Two-sided solves run in groups of ``GROUP`` points per design of the batch: a design
-#: whose whole stroke failed takes a few groups, a batch with few failures one.
-GROUP = 8
-#: Rounds of probes, fills and two-sided solves at most (the first, and two for stretches
-#: between gaps).
+#: Points solved at once, per design of the batch: a design whose whole stroke failed
+#: takes a few groups, a batch with few failures one.
+GROUP = 2
+#: Rounds at most (the first, and those for stretches between gaps).
 ROUNDS = 3
-#: Probes a design per round.
-PROBES = 2
+#: A two-sided solve starts from the converged pose after the point only where that pose is
+#: at most this many points away.
+RIGHT_REACH = 3
+#: A fill step's Newton iterations at most: a continued guess that needs more is left to
+#: the two-sided solves.
+FILL_ITERATIONS = 8
+#: The kinds of solve (``solve_points``'s `mode`).
+FRESH, TWO_SIDED, CONTINUE = 0, 1, 2
+_FIELDS = ("q", "status", "steps", "residual", "cond", "branch")
 
 
 class Context(NamedTuple):
@@ -92,15 +99,7 @@ def _scatter(x, j, mask, v):
     """``x`` with ``x[d, j[d, l]] = v[d, l]`` where ``mask (D, L)`` (other lanes dropped)."""
     d, nb = x.shape[:2]
     rows = jnp.broadcast_to(jnp.arange(d)[:, None], j.shape)
-    cols = jnp.where(mask, j, nb)  # out of range: dropped
-    return x.at[rows, cols].set(v, mode="drop")
-
-
-def _record(pts: PointResults, j, mask, res) -> PointResults:
-    """``pts`` with the points ``j (D, L)`` where ``mask`` set from ``res`` (fields ``(D, L, ...)``
-    named as ``PointResults``'s)."""
-    fields = ("q", "status", "steps", "residual", "cond", "branch")
-    return pts._replace(**{f: _scatter(getattr(pts, f), j, mask, getattr(res, f).astype(getattr(pts, f).dtype)) for f in fields})
+    return x.at[rows, jnp.where(mask, j, nb)].set(v.astype(x.dtype), mode="drop")
 
 
 def _nearest(conv, n):
@@ -113,132 +112,44 @@ def _nearest(conv, n):
     return left, right
 
 
-def _per_lane(setup: StrokeSetup, fn, *args):
-    """``fn(p, b0, *lane args)`` over designs x lanes (``(D, L, ...)`` args)."""
-    d, lanes = args[0].shape[:2]
-    flat = lambda x: x.reshape((d * lanes,) + x.shape[2:])  # noqa: E731
-    rep = lambda x: jnp.repeat(x, lanes, axis=0)  # noqa: E731
-    out = jax.vmap(fn)(jax.tree_util.tree_map(rep, setup.p), rep(setup.b0), *map(flat, args))
-    return jax.tree_util.tree_map(lambda x: x.reshape((d, lanes) + x.shape[1:]), out)
-
-
-# --------------------------------------------------------------------------- 1. probes
-def probe(setup: StrokeSetup, ctx: Context, pts: PointResults, at, want):
-    """A fresh assembly at the points ``at (D, PROBES)`` where ``want``, from the nearest
-    converged pose before each (else the guess).  Returns ``(pts, ok)``: the points with
-    the probes' answers where they converged (a failed probe leaves the point as it was:
-    the two-sided solves take it), and which probes did."""
-    conv = pts.status == Status.CONVERGED
-    left, _ = _nearest(conv, ctx.n)
-    start = _gather(left, at)
-    guess = where(_expand(start >= 0, pts.q[:, :1]), _gather(pts.q, start), ctx.g0[:, None])
-
-    def one(p_, b_, u_, g_, want_):
-        return assemble(setup.mech, setup.options, u_, p_, g_, g_, b_, True, skip=~want_)
-
-    res = _per_lane(setup, one, _inputs(ctx, at), guess, want)
-    ok = want & (res.status == Status.CONVERGED)
-    return _record(pts, at, ok, res), ok
-
-
-# --------------------------------------------------------------------------- 2. fills
-class FillState(NamedTuple):
-    """The fills' loop state: step `t`, the points so far (`pts`), and which lanes are
-    still going (`go`, ``(D, 2 PROBES)``: each probe's forward and backward fill)."""
-
-    t: jax.Array
-    pts: PointResults
-    go: jax.Array
-
-
-def _secant(q1, q2, u0, u1, u2, have2, s, max_step):
-    """A point's guess from its fill neighbours' roots (``q1`` at ``u1``, the nearer; ``q2``
-    at ``u2`` where ``have2``), ``(..., m)``: linear extrapolation, dropped where its step is
-    larger than ``max_step`` (scaled, as Newton's)."""
-    step_u = jnp.linalg.norm(u0 - u1, axis=-1)
-    prev_u = jnp.linalg.norm(u1 - u2, axis=-1)
-    ratio = jnp.clip(step_u / jnp.where(prev_u > 0, prev_u, 1.0), 0.0, 2.0)
-    step = (q1 - q2) * ratio[..., None]
-    keep = have2 & (prev_u > 0) & (jnp.max(jnp.abs(step) / s, axis=-1) <= max_step)
-    return q1 + where(keep[..., None], step, 0.0)
-
-
-def fill(setup: StrokeSetup, ctx: Context, pts: PointResults, at, ok) -> PointResults:
-    """From each converged probe (``at``, ``ok``: ``(D, PROBES)``), continuation forward and
-    backward along the failed points, one point a step for every lane, until every fill
-    stopped (at a point it could not solve, or one solved already)."""
+# --------------------------------------------------------------------------- the solves
+def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, mode, tried, guess) -> PointResults:
+    """The points ``todo (D, nb)`` solved on their own by ``stroke_point.multistart``: a
+    fresh assembly around the nearest converged pose before the point (else the guess)
+    where ``mode`` is ``FRESH``, the two-sided starts where ``TWO_SIDED``, one start from
+    ``guess (D, nb, m)`` where ``CONTINUE`` (the same `mode` for every point).  In groups of
+    ``GROUP`` points per design, only as many groups as there are points.  A point solved
+    before (``tried (D, nb)``) takes the new answer only where it is better
+    (``stroke_point.score``)."""
     mech, opts = setup.mech, setup.options
-    seed = jnp.concatenate([at, at], axis=1)
-    step = jnp.concatenate([jnp.ones_like(at), -jnp.ones_like(at)], axis=1)
-    scales = jnp.repeat(setup.scales[:, None], seed.shape[1], axis=1)
-
-    def lane(p_, b_, u_, g_, go_):
-        return checked_step(mech, opts, u_, p_, g_, b_, where(go_, FRESH_STEPS, 0))
-
-    def body(st: FillState) -> FillState:
-        j = seed + step * st.t
-        near, far = j - step, j - 2 * step
-        inside = (j >= 0) & (j < ctx.n)
-        conv = st.pts.status == Status.CONVERGED
-        go = st.go & inside & _gather(ctx.fail, j) & ~_gather(conv, j)
-        have2 = (far >= 0) & (far < ctx.n) & _gather(conv, far)
-        u0, u1, u2 = _inputs(ctx, j), _inputs(ctx, near), _inputs(ctx, far)
-        guess = _secant(_gather(st.pts.q, near), _gather(st.pts.q, far), u0, u1, u2, have2, scales, opts.max_step)
-        chk = _per_lane(setup, lane, u0, guess, go)
-        solved = go & chk.ok
-        res = PointResults(chk.q, jnp.full(j.shape, Status.CONVERGED, jnp.int32), chk.steps, chk.residual, chk.cond, chk.branch, None, None)
-        pts = _record(st.pts, j, solved, res)
-        return FillState(st.t + 1, pts, solved)
-
-    def more(st: FillState):
-        return (st.t < ctx.n) & jnp.any(st.go)
-
-    return jax.lax.while_loop(more, body, FillState(jnp.ones((), jnp.int32), pts, jnp.concatenate([ok, ok], axis=1))).pts
-
-
-def unwrap(setup: StrokeSetup, ctx: Context, pts: PointResults, moved) -> PointResults:
-    """The points ``moved (D, nb)`` (those the repair solved, and any the walk solved after
-    its first failure) moved by whole turns, in stroke
-    order, to within half a turn of the converged point before each (else the guess),
-    where the equations allow it: a run re-entered after a gap starts within half a turn
-    of the last pose before the gap (what a walk gives), and no two neighbours differ by
-    a turn."""
-    mech, opts = setup.mech, setup.options
-    ok = pts.status == Status.CONVERGED
-    u_all = jnp.broadcast_to(ctx.us, ctx.fail.shape + ctx.us.shape[-1:])
-
-    def one(q_, g_, u_, p_, ok_, r_):
-        return whole_turns(mech, opts, q_, g_, u_, p_, ok_, r_)
-
-    def step(carry, x):
-        prev = carry
-        q, u, ok_, move, res = x
-        q = where(move[:, None], jax.vmap(one)(q, prev, u, setup.p, move & ok_, res), q)
-        return where(ok_[:, None], q, prev), q
-
-    xs = tuple(jnp.moveaxis(a, 1, 0) for a in (pts.q, u_all, ok, moved & ok, pts.residual))
-    _, q = jax.lax.scan(step, ctx.g0, xs)
-    return pts._replace(q=jnp.moveaxis(q, 0, 1))
-
-
-# --------------------------------------------------------------------------- 3. point by point
-def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, one, tried) -> PointResults:
-    """The points ``todo (D, nb)`` solved on their own by ``one(u, p, b0, q_left, q_right,
-    has_right, live) -> NewtonResult`` (``q_left``: the nearest converged pose before the
-    point, else the guess; ``q_right``: the nearest after it, where ``has_right``), in
-    groups of ``GROUP`` points per design, as many groups as there are such points.  A
-    point solved before (``tried (D, nb)``) takes the new answer only where it is better
-    (``stroke_point.score``: on the branch, then on another branch)."""
     d, nb = ctx.fail.shape
+    m = pts.q.shape[-1]
     left, right = _nearest(pts.status == Status.CONVERGED, ctx.n)
     size = d * nb
     group = min(size, GROUP * d)
     order = jnp.nonzero(todo.reshape(-1), size=size, fill_value=0)[0]
     count = jnp.sum(todo)
     u_all = jnp.broadcast_to(ctx.us, (d,) + ctx.us.shape[-2:]).reshape((size,) + ctx.us.shape[-1:])
-    q_flat = pts.q.reshape((size, -1))
-    design = jnp.repeat(jnp.arange(d), nb)
     flat = lambda x: x.reshape((size,) + x.shape[2:])  # noqa: E731
+    q_flat, design = flat(pts.q), jnp.repeat(jnp.arange(d), nb)
+    dtype = pts.q.dtype
+    cap = jnp.asarray(opts.max_step, dtype)
+    # the two-sided table: left, left at a tenth of the cap (after a left start that did not
+    # stall), right, likewise; padded to the fresh table's length
+    two_caps = jnp.concatenate([jnp.stack([cap, 0.1 * cap, cap, 0.1 * cap]), jnp.full((STARTS - 2,), cap)])
+    two_after = jnp.asarray([False, True, False, True] + [False] * (STARTS - 2))
+
+    fresh, cont = mode == FRESH, mode == CONTINUE
+
+    def one(u_, p_, b_, q_l, q_r, has_r, g_, live):
+        f_starts, f_caps = fresh_starts(mech, opts, q_l, p_)
+        t_starts = jnp.concatenate([jnp.stack([where(cont, g_, q_l), q_l, q_r, q_r]), jnp.broadcast_to(q_l, (STARTS - 2, m))])
+        starts = where(fresh, f_starts, t_starts)
+        caps = where(fresh, f_caps, two_caps)
+        after = two_after & ~fresh
+        count_ = where(fresh, STARTS + 2, where(cont, 1, where(has_r, 4, 2)))
+        budget = where(cont, FILL_ITERATIONS, opts.max_iterations)
+        return multistart(mech, opts, u_, p_, starts, caps, count_, b_, True, skip=~live, after_stall=after, budget=budget)[0]
 
     def solve(k, pts_):
         idx = jax.lax.dynamic_slice_in_dim(order, k * group, group)
@@ -248,90 +159,143 @@ def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, one,
         q_l = where((l_i >= 0)[:, None], q_flat[dsg * nb + jnp.clip(l_i, 0, nb - 1)], ctx.g0[dsg])
         q_r = q_flat[dsg * nb + jnp.clip(r_i, 0, nb - 1)]
         p_ = jax.tree_util.tree_map(lambda x: x[dsg], setup.p)
-        res: NewtonResult = jax.vmap(one)(u_all[idx], p_, setup.b0[dsg], q_l, q_r, r_i < nb, live)
+        # the pose after a point serves where it is near (a stretch re-entered at a toggle);
+        # deeper in a gap the start before the point says as much, at half the cost
+        near_r = (r_i < nb) & (r_i - idx % nb <= RIGHT_REACH)
+        res: NewtonResult = jax.vmap(one)(u_all[idx], p_, setup.b0[dsg], q_l, q_r, near_r, flat(guess)[idx], live)
         take = live & (~flat(tried)[idx] | (score(res.status) > score(flat(pts_.status)[idx])))
         put = lambda x, v: flat(x).at[jnp.where(take, idx, size)].set(v.astype(x.dtype), mode="drop").reshape(x.shape)  # noqa: E731
-        return pts_._replace(**{f: put(getattr(pts_, f), getattr(res, f)) for f in ("q", "status", "steps", "residual", "cond", "branch")})
+        return pts_._replace(**{f: put(getattr(pts_, f), getattr(res, f)) for f in _FIELDS})
 
     return jax.lax.fori_loop(0, (count + group - 1) // group, solve, pts)
 
 
-def two_sided(setup: StrokeSetup, ctx: Context, pts: PointResults, tried):
-    """Every point still failed whose nearest converged neighbours are not the ones it was
-    last ``tried`` from (``(D, nb, 2)``), solved on its own (``solve_points``) from the
-    nearest converged pose before it and the nearest after it, each at the full and a
-    tenth of the step cap: at most four Newton solves.  Returns ``(pts, tried)``."""
-    mech, opts = setup.mech, setup.options
-    nb = ctx.fail.shape[1]
+# --------------------------------------------------------------------------- fills
+def _shift(x, k: int, fill):
+    """``x (D, nb, ...)`` moved by ``k`` points along the stroke (``x[:, j - k]`` at ``j``)."""
+    pad = jnp.full_like(x[:, : abs(k)], fill)
+    return jnp.concatenate([pad, x[:, :-k]], axis=1) if k > 0 else jnp.concatenate([x[:, -k:], pad], axis=1)
+
+
+def _secant(q1, q2, u0, u1, u2, have2, s, max_step):
+    """A point's guess from its neighbours' roots along a fill (``q1`` at ``u1``, the nearer;
+    ``q2`` at ``u2`` where ``have2``), ``(..., m)``: linear extrapolation, dropped where its
+    step is larger than ``max_step`` (scaled, as Newton's)."""
+    step_u = jnp.linalg.norm(u0 - u1, axis=-1)
+    prev_u = jnp.linalg.norm(u1 - u2, axis=-1)
+    ratio = jnp.clip(step_u / jnp.where(prev_u > 0, prev_u, 1.0), 0.0, 2.0)
+    step = (q1 - q2) * ratio[..., None]
+    keep = have2 & (prev_u > 0) & (jnp.max(jnp.abs(step) / s[..., None, :], axis=-1) <= max_step)
+    return q1 + where(keep[..., None], step, 0.0)
+
+
+def frontier(setup: StrokeSetup, ctx: Context, pts: PointResults, newly):
+    """``(todo, guess)``: the failed points next to a point converged by the last phase
+    (``newly (D, nb)``), and each one's guess continued from it (``_secant``, through the
+    converged point beyond where there is one): one step of a fill."""
     conv = pts.status == Status.CONVERGED
-    ends = jnp.stack(_nearest(conv, ctx.n), axis=-1)
-    todo = ctx.fail & ~conv & (jnp.arange(nb) < ctx.n) & jnp.any(ends != tried, axis=-1)
-    caps = jnp.asarray([opts.max_step, 0.1 * opts.max_step] * 2, pts.q.dtype)
-
-    def one(u_, p_, b_, q_l, q_r, has_r, live):
-        starts = jnp.stack([q_l, q_l, q_r, q_r])
-        return multistart(mech, opts, u_, p_, starts, caps, where(has_r, 4, 2), b_, True, skip=~live)[0]
-
-    return solve_points(setup, ctx, pts, todo, one, tried[..., 0] > -2), where(todo[..., None], ends, tried).astype(tried.dtype)
-
-
-def branch_probes(setup: StrokeSetup, ctx: Context, pts: PointResults, probed, tried):
-    """A fresh assembly (``stroke_point.assemble``, from the nearest converged pose before
-    the point) at every failed point where the loop closes only on another branch
-    (``BRANCH``) not ``probed`` yet: an assemblable stretch the walk never reached, between
-    two gaps.  Returns ``(pts, probed)``."""
-    todo = ctx.fail & (pts.status == Status.BRANCH) & ~probed & (jnp.arange(ctx.fail.shape[1]) < ctx.n)
-
-    def one(u_, p_, b_, q_l, q_r, has_r, live):
-        return assemble(setup.mech, setup.options, u_, p_, q_l, q_l, b_, True, skip=~live)
-
-    return solve_points(setup, ctx, pts, todo, one, tried), probed | todo
+    u = jnp.broadcast_to(ctx.us, ctx.fail.shape + ctx.us.shape[-1:])
+    sides = []
+    for k in (1, -1):  # from the point before (a forward fill), from the point after
+        near = _shift(newly, k, False)
+        guess = _secant(_shift(pts.q, k, 0.0), _shift(pts.q, 2 * k, 0.0), u, _shift(u, k, 0.0), _shift(u, 2 * k, 0.0),
+                        _shift(conv, 2 * k, False), setup.scales, setup.options.max_step)  # fmt: skip
+        sides.append((near, guess))
+    (fwd, g_f), (bwd, g_b) = sides
+    todo = ctx.fail & ~conv & (fwd | bwd)
+    return todo, where(fwd[..., None], g_f, g_b)
 
 
-# --------------------------------------------------------------------------- rounds
-class Round(NamedTuple):
-    """The rounds' loop state: round `r`, the points `pts`, the neighbours each failed point
-    was `tried` from (``(D, nb, 2)``), and the `BRANCH` points `probed` already."""
+# --------------------------------------------------------------------------- angles
+def unwrap(setup: StrokeSetup, ctx: Context, pts: PointResults, moved) -> PointResults:
+    """The points ``moved (D, nb)`` (those the repair solved, and any the walk solved after
+    its first failure) moved by whole turns, in stroke order, to within half a turn of the
+    converged point before each (else the guess), where the equations allow it: a stretch
+    re-entered after a gap starts within half a turn of the last pose before the gap (what
+    a walk gives), and no two neighbours differ by a turn."""
+    mech, opts = setup.mech, setup.options
+    ok = pts.status == Status.CONVERGED
+    u_all = jnp.broadcast_to(ctx.us, ctx.fail.shape + ctx.us.shape[-1:])
+
+    def one(q_, g_, u_, p_, ok_, r_):
+        return whole_turns(mech, opts, q_, g_, u_, p_, ok_, r_)
+
+    def step(prev, x):
+        q, u, ok_, move, res = x
+        q = where(move[:, None], jax.vmap(one)(q, prev, u, setup.p, move & ok_, res), q)
+        return where(ok_[:, None], q, prev), q
+
+    xs = tuple(jnp.moveaxis(a, 1, 0) for a in (pts.q, u_all, ok, moved & ok, pts.residual))
+    _, q = jax.lax.scan(step, ctx.g0, xs)
+    return pts._replace(q=jnp.moveaxis(q, 0, 1))
+
+
+# --------------------------------------------------------------------------- phases
+DONE = -1
+
+
+class Phase(NamedTuple):
+    """The repair's loop state: round `r`, the phase's `kind` (``FRESH``, ``CONTINUE``: a
+    fill step, ``TWO_SIDED``, or ``DONE``), the points `pts`, the points the last phase
+    converged (`newly`), the points a fill tried (`filled`), the converged neighbours each
+    failed point was last solved two-sided from (`ends`, ``(D, nb, 2)``; -2: never), and the
+    points assembled afresh (`fresh`)."""
 
     r: jax.Array
+    kind: jax.Array
     pts: PointResults
-    tried: jax.Array
-    probed: jax.Array
+    newly: jax.Array
+    filled: jax.Array
+    ends: jax.Array
+    fresh: jax.Array
 
 
 def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResults:
     """The straight-line walk's points ``pts`` (``(D, nb, ...)``, derivatives included where
     ``setup.derivs``) with its failed points (``valid`` inputs, not ``CONVERGED``, within
-    the first ``n``) solved again by rounds of this module's three stages.  The points the
-    walk solved keep every value it gave (after its first failure, up to whole turns:
-    ``unwrap``)."""
+    the first ``n``) solved again by this module's phases, one ``solve_points`` each.  The
+    points the walk solved keep every value it gave (after its first failure, up to whole
+    turns: ``unwrap``)."""
     d, nb = valid.shape
-    fail = valid & (pts.status != Status.CONVERGED) & (jnp.arange(nb) < n)
+    i = jnp.arange(nb)
+    fail = valid & (pts.status != Status.CONVERGED) & (i < n)
     ctx = Context(us, fail, n, g0)
     walked = pts
-    e = n - 1
+    ends_of_stroke = fail & ((i == 0) | (i == n - 1))[None, :]
 
-    def round_(st: Round) -> Round:
-        # the first round: a fresh assembly at each failed end of the stroke and fills
-        # from there; later ones: every BRANCH point not probed yet
-        at = jnp.broadcast_to(jnp.stack([jnp.zeros((), jnp.int32), e.astype(jnp.int32)]), (d, PROBES))
-        want = jnp.stack([fail[:, 0], _gather(fail, at[:, 1:])[:, 0] & (e > 0)], axis=1) & (st.r == 0)
-        pts, ok = probe(setup, ctx, st.pts, at, want)
-        pts = fill(setup, ctx, pts, at, ok)
-        pts, probed = branch_probes(setup, ctx, pts, st.probed | (st.r == 0), st.tried[..., 0] > -2)
-        pts, tried = two_sided(setup, ctx, pts, st.tried)
-        return Round(st.r + 1, pts, tried, where(st.r == 0, st.probed, probed))
+    def waiting(st: Phase):
+        return fail & (st.pts.status == Status.BRANCH) & ~st.fresh
 
-    def more(st: Round):
-        left = ctx.fail & (st.pts.status == Status.BRANCH) & ~st.probed
-        return (st.r == 0) | ((st.r < ROUNDS) & jnp.any(left))
+    def body(st: Phase) -> Phase:
+        conv = st.pts.status == Status.CONVERGED
+        near = jnp.stack(_nearest(conv, n), axis=-1)
+        solved = (st.ends[..., 0] > -2) | st.fresh
+        step, guess = frontier(setup, ctx, st.pts, st.newly)
+        todo_fresh = where(st.r == 0, ends_of_stroke, waiting(st))
+        todo_two = fail & ~conv & jnp.any(near != st.ends, axis=-1)
+        kind = st.kind
+        todo = where(kind == FRESH, todo_fresh, where(kind == CONTINUE, step & ~st.filled, todo_two))
+        # a fill writes only what it converges (a better answer than any failure)
+        tried = where(kind == CONTINUE, True, solved)
+        pts = solve_points(setup, ctx, st.pts, todo, kind, tried, guess)
+        newly = todo & (pts.status == Status.CONVERGED)
+        filled = st.filled | (todo & (kind == CONTINUE))
+        ends = where((todo & (kind == TWO_SIDED))[..., None], near, st.ends).astype(st.ends.dtype)
+        fresh = st.fresh | (todo & (kind == FRESH))
+        nxt = Phase(st.r, kind, pts, newly, filled, ends, fresh)
+        more_fill = jnp.any(ctx.fail & (pts.status != Status.CONVERGED) & (_shift(newly, 1, False) | _shift(newly, -1, False)) & ~filled)
+        again = (st.r + 1 < ROUNDS) & jnp.any(waiting(nxt))
+        kind_next = where(kind == TWO_SIDED, where(again, FRESH, DONE), where(more_fill, CONTINUE, TWO_SIDED))
+        return nxt._replace(r=st.r + (kind == TWO_SIDED).astype(st.r.dtype), kind=kind_next.astype(st.kind.dtype))
 
-    init = Round(jnp.zeros((), jnp.int32), pts._replace(d1=None, d2=None), jnp.full((d, nb, 2), -2, jnp.arange(nb).dtype), jnp.zeros((d, nb), bool))
+    no = jnp.zeros((d, nb), bool)
+    init = Phase(jnp.zeros((), jnp.int32), jnp.asarray(FRESH, jnp.int32), pts._replace(d1=None, d2=None), no, no,
+                 jnp.full((d, nb, 2), -2, i.dtype), no)  # fmt: skip
+    done = jax.lax.while_loop(lambda st: st.kind != DONE, body, init)
     # the walk's points after its first failure too: one it solved there from a stale
-    # anchor (the pose before a gap) counts its turns from that anchor, not from the
-    # stretch the repair found before it
+    # anchor (the pose before a gap) counts its turns from that anchor
     after = jnp.cumsum(fail, axis=1) > 0
-    pts = unwrap(setup, ctx, jax.lax.while_loop(more, round_, init).pts, after)
+    pts = unwrap(setup, ctx, done.pts, after)
     if not setup.derivs:
         return pts._replace(d1=walked.d1, d2=walked.d2)
     new = fail & (pts.status == Status.CONVERGED)

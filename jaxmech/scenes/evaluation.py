@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..continuation import all_converged, repair_strokes, repaired_rows, robust_size, stroke
+from ..continuation import all_converged, repair_strokes, repaired_rows, robust_size, stroke, take_rows
 from ..stored import cached_call, cached_chain
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
 from ..linalg import where
@@ -191,12 +191,7 @@ def repaired_part(part: StrokePart, p, repair_rows, size: int | None = None) -> 
     passed = all_converged(part.solution.status)
     if np.all(passed):
         return part
-    host_p = {k: np.asarray(v) for k, v in p.items()}
-
-    def rows(idx):
-        return repair_rows({k: v[idx] for k, v in host_p.items()}, jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], part))
-
-    return repaired_rows(part, passed, rows, size or robust_size(passed.size))
+    return repaired_rows(part, passed, lambda idx: repair_rows(*take_rows((p, part), idx)), size or robust_size(passed.size))
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2))
