@@ -4,33 +4,33 @@ again with bounded work, batched over every failed point of every design at once
 The straight-line walk (``stroke_stages.walk_block``) solves a stroke forward by checked
 Newton steps from a predicted guess; a point those steps do not bring home stays failed,
 and so do the points after it (the anchor stays at the last trusted pose, without its
-series).  ``repair`` takes those failures in rounds; every Newton solve of a round is one
-call of one kernel (``solve_points``: ``stroke_point.multistart`` over the points to solve,
-gathered in groups of ``GROUP`` points per design, as many groups as there are points), so
-no loop's trip count is set by one design for a whole batch, and the program holds one copy
-of the Newton kernel:
+series).  ``repair`` takes those failures in phases of one loop; every Newton solve of a
+phase is one call of one kernel (``solve_points``: ``stroke_point.multistart`` over the
+points to solve, gathered in groups of ``GROUP`` points per design, as many groups as there
+are points), so no loop's trip count is set by one design for a whole batch, and the
+program holds one copy of the Newton kernel:
 
 1. **Fresh assemblies** (``FRESH``: from the nearest converged pose before the point, else
    the design's guess; the same pose with a tenth of the step cap; then
-   ``stroke_point.STARTS`` fixed offsets around it).  The first round assembles each failed
-   end of the stroke (point 0, the last point); later rounds every point where the loop
-   closes only on another branch (``BRANCH``: an assemblable stretch the walk never
-   reached, between two gaps).
-2. **Fills** (``fill``, first round): from each end assembled, continuation along the failed
-   points towards the converged ones, one checked step a point (up to ``FRESH_STEPS`` plain
-   Newton steps from a secant prediction), stopping at the first failure.  This re-enters a
-   gap from its far side, where the requested branch's poses are easy to reach (a stroke
+   ``stroke_point.STARTS`` fixed offsets around it), at each failed end of the stroke
+   (point 0, the last point) and, later, at every point where the loop closes only on
+   another branch (``BRANCH``: an assemblable stretch the walk never reached).
+2. **Fill steps** (``CONTINUE``): the failed points next to a point the last phase
+   converged, from a secant prediction along the stroke, one Newton solve of at most
+   ``FILL_ITERATIONS`` each, step after step until no fill goes on.  This re-enters a gap
+   from its far side, where the requested branch's poses are easy to reach (a stroke
    re-enters the assemblable range at a toggle, which the walk's side cannot cross).
 3. **Two-sided solves** (``TWO_SIDED``): every point still failed whose nearest converged
-   neighbours changed, from the nearest converged pose before it and the nearest after it,
-   each at the full step cap and, where that one did not stall (``INFEASIBLE``), at a tenth
-   of it: two to four Newton solves a point.
+   neighbours changed, from the nearest converged pose before it, and from the nearest
+   after it where that is at most ``RIGHT_REACH`` points away, each at the full step cap
+   and, where that one did not stall (``INFEASIBLE``), at a tenth of it.  A point they
+   converge next to failed ones (a stretch between two gaps) starts fill steps again.
 
-A point solved before keeps the better answer (``stroke_point.score``).  Rounds go on (at
-most ``ROUNDS``) while some design has a ``BRANCH`` point not assembled afresh yet.  Angles
-stay continuous as numbers (``unwrap``): each repaired pose is moved by whole turns, in
-stroke order, to within half a turn of the converged pose before it (else of the guess), so
-a stretch re-entered after a gap starts within half a turn of the last pose before the gap.
+A point solved before keeps the better answer (``stroke_point.score``).  At most
+``ROUNDS`` two-sided phases run.  Angles stay continuous as numbers (``unwrap``): each
+repaired pose is moved by whole turns, in stroke order, to within half a turn of the
+converged pose before it (else of the guess), so a stretch re-entered after a gap starts
+within half a turn of the last pose before the gap.
 Every reported pose passed the kernel's tests on the requested branch.  Shapes: ``D``
 designs, ``nb`` (bucketed) stroke points, the first ``n`` of them the stroke, ``m``
 coordinates, ``dof`` inputs.
@@ -54,7 +54,7 @@ __all__ = ["repair", "GROUP", "ROUNDS", "FRESH", "TWO_SIDED", "CONTINUE"]
 #: Points solved at once, per design of the batch: a design whose whole stroke failed
 #: takes a few groups, a batch with few failures one.
 GROUP = 2
-#: Rounds at most (the first, and those for stretches between gaps).
+#: Two-sided phases at most (the first, and those after stretches found between gaps).
 ROUNDS = 3
 #: A two-sided solve starts from the converged pose after the point only where that pose is
 #: at most this many points away.
@@ -285,7 +285,10 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
         nxt = Phase(st.r, kind, pts, newly, filled, ends, fresh)
         more_fill = jnp.any(ctx.fail & (pts.status != Status.CONVERGED) & (_shift(newly, 1, False) | _shift(newly, -1, False)) & ~filled)
         again = (st.r + 1 < ROUNDS) & jnp.any(waiting(nxt))
-        kind_next = where(kind == TWO_SIDED, where(again, FRESH, DONE), where(more_fill, CONTINUE, TWO_SIDED))
+        # a two-sided solve that converged a point next to failed ones (a stretch between
+        # gaps) starts a fill too, while rounds are left
+        after_two = where(more_fill & (st.r + 1 < ROUNDS), CONTINUE, where(again, FRESH, DONE))
+        kind_next = where(kind == TWO_SIDED, after_two, where(more_fill, CONTINUE, TWO_SIDED))
         return nxt._replace(r=st.r + (kind == TWO_SIDED).astype(st.r.dtype), kind=kind_next.astype(st.kind.dtype))
 
     no = jnp.zeros((d, nb), bool)

@@ -141,13 +141,13 @@ def check_stroke(mech, us, p, truth, others, angles, scaled):
         scale = max(abs(v) for v in p.values())
         assert np.max(np.abs(q[ok][:, lengths] - q_true[ok][:, lengths]), initial=0) < ACCURACY * scale
     assert not np.any(np.isin(st_[~anywhere], [S.CONVERGED, S.BRANCH])), "a pose reported where none exists"
-    # Right as numbers: neighbours within half a turn; across a gap (where the angles may
-    # truly change a lot) no whole turn is added.
+    # Right as numbers: neighbours within half a turn; across a gap no whole turn is added
+    # (the first pose after a gap within half a turn of the last before it).
     both = ok[:-1] & ok[1:]
     steps = np.abs(np.diff(q[:, angles], axis=0))[both]
     assert np.max(steps, initial=0) < np.pi, f"a jump of {np.max(steps):.3g} rad between neighbours"
     across = np.abs(np.diff(q[ok][:, angles], axis=0))
-    assert np.max(across, initial=0) < 2 * np.pi, f"a jump of {np.max(across):.3g} rad across a gap"
+    assert np.max(across, initial=0) <= np.pi, f"a jump of {np.max(across):.3g} rad across a gap"
     # The same design in other units: the same status everywhere.
     for k in scaled:
         pk = {n: (v * k if n in mech.lengths else v) for n, v in p.items()}

@@ -79,10 +79,10 @@ def _cross(r, f):
 def test_power_balance_and_newton_euler_efforts(name):
     lk, res = run(name)
     assert np.all(np.asarray(res.status) == 0), jm.status_counts(res.status)
-    p = lk.params
+    p, mass = lk.params, lk.mass_properties()
     dE = np.zeros(res.q.shape[0])
     for body in lk.model.bodies:
-        m, J = p[body.mass], p[body.inertia]
+        m, _, J = mass[body.name]
         _, v, a = (np.asarray(x) for x in res.points[body.position])
         dE += m * np.real(np.conj(v) * a) + m * p["g"] * v.imag  # gravity down: dV/dt = m g vy
         if J:

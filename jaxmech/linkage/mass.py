@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["mass_shape", "shape_properties", "link_mass_properties"]
+__all__ = ["mass_shape", "shape_properties", "link_mass_properties", "derived_shapes"]
 
 
 def _hull(names, z: np.ndarray) -> list:
@@ -84,3 +84,19 @@ def link_mass_properties(points, mass: float) -> tuple[complex, float]:
     kind, corners = mass_shape(names, points)
     g, j = shape_properties(kind, [complex(points[int(n)]) for n in corners], float(mass))
     return complex(g), float(j)
+
+
+def derived_shapes(mass_spec: dict, joints: dict, links: dict, points: dict) -> tuple:
+    """``Topology.mass_shapes``: for each link whose centre of mass or inertia is not given
+    (``mass_spec``: ``{link: (mass, centre or None, inertia or None)}``), the uniform shape
+    through its joints (through its points where it has fewer than two joints) that the
+    drawing (``points``: ``{name: complex}``) gives it, ``(link, kind, corners, centre
+    derived, inertia derived)``."""
+    out = []
+    for link, (_, c, J) in mass_spec.items():
+        if c is not None and J is not None:
+            continue
+        names = joints[link] if len(joints[link]) >= 2 else tuple(links[link])
+        kind, corners = mass_shape(names, [points[x] for x in names])
+        out.append((link, kind, corners, c is None, J is None))
+    return tuple(out)

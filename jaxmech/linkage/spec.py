@@ -18,9 +18,9 @@ from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..continuation import solve_stroke
 from ..options import SolverOptions
 from ..units import to_si
-from .mass import link_mass_properties, mass_shape
+from .mass import derived_shapes, link_mass_properties
 from .terms import show
-from .topology import GROUND, Built, Topology, build
+from .topology import GROUND, Built, Topology, build, link_joints
 
 __all__ = ["Linkage"]
 
@@ -147,13 +147,11 @@ class Linkage:
             drivers=drivers, gravity=(-1j if g_vec is None or abs(g_vec) == 0 else g_vec / abs(g_vec)),
             forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra))
         try:
-            self.built: Built = build(self.topology)
             # the links whose centre of mass and inertia follow from their joints, by the
-            # shape the drawing gives them (build's joints: the points shared by bodies)
-            shapes = self._mass_shapes(self.built.joints)
-            if shapes:
-                self.topology = dataclasses.replace(self.topology, mass_shapes=shapes)
-                self.built = build(self.topology)
+            # shape the drawing gives them
+            shapes = derived_shapes(self.mass_spec, link_joints(self.topology), self.links, self.points)
+            self.topology = dataclasses.replace(self.topology, mass_shapes=shapes)
+            self.built: Built = build(self.topology)
         except ValueError as err:  # said in the linkage's own name
             text = str(err)
             raise ValueError(f"{self.name}: {text.removeprefix('linkage: ')}") from None
@@ -275,19 +273,6 @@ class Linkage:
             J = _number(inertia[k], "kg m^2", f"inertia[{k!r}]") if k in inertia else None
             out[k] = (m, c, J)
         return out
-
-    def _mass_shapes(self, joints) -> tuple:
-        """``Topology.mass_shapes``: for each link without an explicit centre of mass or
-        inertia, the uniform shape through its joints (through its points where it has
-        fewer than two joints) that the drawing gives it (``mass.mass_shape``)."""
-        out = []
-        for link, (_, c, J) in self.mass_spec.items():
-            if c is not None and J is not None:
-                continue
-            names = joints[link] if len(joints[link]) >= 2 else tuple(self.links[link])
-            kind, corners = mass_shape(names, [self.points[x] for x in names])
-            out.append((link, kind, corners, c is None, J is None))
-        return tuple(out)
 
     # ----------------------------------------------------------------- the drawing
     def _drawing_values(self):

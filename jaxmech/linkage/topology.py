@@ -434,6 +434,17 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
     return Model(mech, bodies=bodies, loads=loads, params=tuple(own), joints=joints, program_key=key)
 
 
+def _joints(b: _Builder) -> dict:
+    """Per moving link, the points that join it to another body."""
+    return {link: tuple(x for x in pts if len(b.members[x]) > 1 or x in b.slots) for link, pts in b.links.items()}
+
+
+def link_joints(top: Topology) -> dict:
+    """``Built.joints`` of a topology without building its programs: per moving link, the
+    points that join it to another body (what its default mass properties span)."""
+    return _joints(_Builder(top))
+
+
 @functools.lru_cache(maxsize=64)
 def build(top: Topology) -> Built:
     """The ``Mechanism`` and ``Model`` of a topology, and how its parameters follow from a
@@ -458,7 +469,7 @@ def build(top: Topology) -> Built:
     coord_recipes.update({act: ("length", *pts) for act, pts in b.acts.items()})
     for pin, (_, centre) in b.slots.items():
         coord_recipes[f"psi_{pin}" if centre else f"s_{pin}"] = ("arc", pin, centre) if centre else ("travel",)
-    joints = {link: tuple(x for x in pts if len(b.members[x]) > 1 or x in b.slots) for link, pts in b.links.items()}
+    joints = _joints(b)
     return Built(mechanism=mech, model=model, loops=tuple(loops), recipes=dict(b.recipes),
                  coords={n: coord_recipes[n] for n in coords}, inputs={n: coord_recipes[n] for n in inputs},
                  frames=frames, virtual=dict(b.virtual), joints=joints, blocks=dict(b.blocks), edges=b.edges)

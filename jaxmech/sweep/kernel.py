@@ -179,7 +179,7 @@ class _Staged:
             spec = lambda x: jax.ShapeDtypeStruct((size,) + tuple(x.shape[1:]), x.dtype, sharding=sh)  # noqa: E731
             fn = jit(lambda p_, part_: repair_stage(self.scene, job.points, job.options, p_, part_), in_shardings=(sh, sh), out_shardings=sh)
             self._repair = fn.lower({k: spec(v) for k, v in p.items()}, jax.tree_util.tree_map(spec, self.part_info)).compile()
-        return self._repair(p, part)
+        return self._repair(self._put(p), self._put(part))
 
     def __call__(self, p):
         part = repaired_part(self.first(p), p, self._repair_rows, self.size)
