@@ -170,7 +170,7 @@ class _Staged:
         self._repair = None
 
     def _put(self, tree):
-        return jax.tree_util.tree_map(lambda x: jax.device_put(x, self.sharding), tree)
+        return jax.device_put(tree, self.sharding)  # one call for the whole pytree
 
     def _repair_rows(self, p, part):
         """The repair stage for ``self.size`` designs (host rows of ``p`` and ``part``)."""
