@@ -85,3 +85,26 @@ def test_inverse_dynamics_of_a_swept_design_equals_the_design_drawn_directly(sca
         np.testing.assert_allclose(fa, fb, rtol=0, atol=1e-10 * np.max(np.abs(fb)))
     # and it is not what the old drawing's masses give: the test can fail
     assert np.max(np.abs(np.asarray(old.inverse_dynamics(drive, t).tau) - np.asarray(b.tau))) > 1e-3 * scale_tau
+
+
+def test_a_linkage_is_taken_wherever_a_scene_is():
+    """``sweep_scene``, ``run_scene`` and ``scene_figure`` take the linkage itself (its
+    ``Linkage.scene()``); a swept design's torque is the linkage's own inverse dynamics."""
+    from jaxmech.design import scene_figure
+    from jaxmech.scenes import run_scene
+    from jaxmech.sweep import sweep_scene
+
+    lk = watt()
+    table = {"len_O2_A": np.array([0.95, lk.params["len_O2_A"], 1.03])}  # the middle one: the drawing
+    res = sweep_scene(lk, table=table, points=9, progress=False)
+    assert res.scene == lk.scene().name and np.all(res.status == 0)
+    one = run_scene(lk, points=9, len_O2_A=1.03)
+    torque = [k for k in res.columns if k.startswith("effort_")][0]
+    # the torque of the swept design, against the linkage's inverse dynamics at the same drive
+    drive = jm.ConstantSpeed(lk.input_at_drawing[0], 1.0)
+    t = np.asarray(one.table()["t[s]"])
+    direct = lk.inverse_dynamics(drive, t, p={"len_O2_A": 1.03})
+    np.testing.assert_allclose(res.columns[torque][2], np.asarray(direct.tau[:, 0]), rtol=0, atol=1e-10 * np.max(np.abs(direct.tau)))
+    fig = scene_figure(lk, lambda c, p: c[torque][-1], points=9)
+    value, ok = fig(lk.params)
+    assert bool(ok) and abs(float(value) - float(res.columns[torque][1][-1])) <= 1e-10 * abs(float(value))

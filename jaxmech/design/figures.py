@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..options import SolverOptions
-from ..scenes.base import Scene
+from ..scenes.base import Scene, as_scene
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..status import Status
 from ..scenes.columns import design_columns
@@ -132,7 +132,8 @@ def scene_figure(
 
     **Arguments**
 
-    - `scene`: the scene (its stroke, drive, guess and outputs are used as in ``run_scene``).
+    - `scene`: the scene (its stroke, drive, guess and outputs are used as in ``run_scene``),
+      a registered scene's name or a ``Linkage`` (``Linkage.scene()``).
     - `reduce`: ``reduce(columns, p) -> scalar``; `columns` maps ``NAME[UNIT]`` (the
       names of ``SceneResult.table``, status excepted) to ``(points,)`` arrays, `p` maps
       every parameter name to a scalar.  Examples:
@@ -147,8 +148,7 @@ def scene_figure(
     **Returns** a ``SceneFigure``: ``f(p) -> (value, ok)``.  Build it once and reuse it:
     jitted callers compile once per figure object.
     """
-    if not isinstance(scene, Scene):
-        raise ValueError(f"scene_figure: scene must be a Scene, got {type(scene).__name__}")
+    scene = as_scene(scene, "scene_figure")
     if not callable(reduce):
         raise ValueError("scene_figure: reduce must be a function reduce(columns, p) -> scalar")
     fixed = dict(fixed or {})
