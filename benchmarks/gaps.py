@@ -21,8 +21,15 @@ feasible one's (the ratios the acceptance reads).  Beside them, the core kernel'
 state: ``stroke_kinematics`` of the same feasible four-bar designs (one call, every design's
 stroke, warm), poses/s against the sweep's.  The load average is recorded before and after.
 
-Run: ``python -m benchmarks.gaps [--quick] [--designs D4] [--designs-six D6] [--repeat R]``;
-writes ``results/gaps.json``.
+Statuses: ``--statuses FILE.npz`` keeps every case's per-point statuses; ``--compare
+FILE.npz`` counts, per case, the points whose status differs from that file's (the same
+designs: the tables are seeded), and ``--package DIR`` runs the cases with another
+checkout's ``jaxmech`` (its folder).  So ``python -m benchmarks.gaps --package OLD
+--statuses old.npz`` then ``python -m benchmarks.gaps --compare old.npz`` says whether a
+change moved any status.
+
+Run: ``python -m benchmarks.gaps [--quick] [--designs D4] [--designs-six D6] [--repeat R]
+[--statuses F] [--compare F] [--package DIR]``; writes ``results/gaps.json``.
 """
 
 from __future__ import annotations
@@ -65,13 +72,16 @@ def case(name: str, d4: int, d6: int):
         return "fourbar", random_designs(ranges, d4, seed=0)
     scene = watt().scene(speed=2 * math.pi)
     d = scene.defaults
-    names = sorted(k for k in d if k.startswith("len_") and "_G_" not in k)[:3] if name == "watt_3pct" else geometric(scene)
+    # sorted: the same table for any order of the scene's parameters (a seeded draw per name)
+    names = sorted(k for k in d if k.startswith("len_") and "_G_" not in k)[:3] if name == "watt_3pct" else sorted(geometric(scene))
     frac = 0.03 if name == "watt_3pct" else 0.10
     ranges = {k: tuple(sorted((float(d[k]) * (1 - frac), float(d[k]) * (1 + frac)))) for k in names}
     return scene, random_designs(ranges, d6, seed=0)
 
 
-def child(name: str, d4: int, d6: int, repeat: int) -> dict:
+def child(name: str, d4: int, d6: int, repeat: int, package: str | None = None, statuses: str | None = None) -> dict:
+    if package:  # another checkout's jaxmech, before the installed one
+        sys.path.insert(0, package)
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -90,6 +100,8 @@ def child(name: str, d4: int, d6: int, repeat: int) -> dict:
         sweep_scene(scene, table=table, points=POINTS, progress=False)
         warm.append(time.perf_counter() - t0)
     st = np.asarray(res.status)
+    if statuses:
+        np.save(statuses, st)
     out = dict(designs=d, points=POINTS, first_call_s=first, warm_s=float(np.median(warm)), warm_all_s=warm,
                designs_per_s=d / float(np.median(warm)), poses_per_s=d * POINTS / float(np.median(warm)),
                failed_designs=int(np.sum(np.any(st != 0, axis=1))), failed_points=int(np.sum(st != 0)),
@@ -115,17 +127,22 @@ def child(name: str, d4: int, d6: int, repeat: int) -> dict:
     return out
 
 
-def run_case(name: str, d4: int, d6: int, repeat: int) -> dict:
+def run_case(name: str, d4: int, d6: int, repeat: int, package: str | None = None):
+    """``(figures, statuses (D, points))`` of a case, run in a fresh process."""
+    import numpy as np
+
     with tempfile.TemporaryDirectory() as store:
         env = dict(os.environ, JAXMECH_COMPILE_CACHE=store, PYTHONPATH=os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")]))
         load = os.getloadavg()
-        cmd = [sys.executable, "-m", "benchmarks.gaps", "--child", name, "--designs", str(d4), "--designs-six", str(d6), "--repeat", str(repeat)]
+        keep = os.path.join(store, "status.npy")
+        cmd = [sys.executable, "-m", "benchmarks.gaps", "--child", name, "--designs", str(d4), "--designs-six", str(d6),
+               "--repeat", str(repeat), "--status-file", keep] + (["--package", package] if package else [])  # fmt: skip
         done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
         if done.returncode != 0:
             raise RuntimeError(f"{name} failed:\n{done.stderr[-3000:]}")
         out = json.loads(done.stdout.strip().splitlines()[-1])
         out["load_before_after"] = [load[0], os.getloadavg()[0]]
-        return out
+        return out, np.load(keep)
 
 
 def main(argv=None):
@@ -133,15 +150,21 @@ def main(argv=None):
     parser.add_argument("--designs", type=int, default=2048, help="four-bar designs per sweep (default 2048)")
     parser.add_argument("--designs-six", type=int, default=1024, help="six-bar designs per sweep (default 1024)")
     parser.add_argument("--repeat", type=int, default=3, help="warm calls per case (median reported)")
+    parser.add_argument("--statuses", default=None, help="keep every case's per-point statuses in this .npz")
+    parser.add_argument("--compare", default=None, help="count the statuses that differ from this .npz's")
+    parser.add_argument("--package", default=None, help="run the cases with the jaxmech of this checkout (its folder)")
     parser.add_argument("--child", default=None, help=argparse_hidden())
+    parser.add_argument("--status-file", default=None, help=argparse_hidden())
     args = parser.parse_args(argv)
     if args.child:
-        print(json.dumps(child(args.child, args.designs, args.designs_six, args.repeat)))
+        print(json.dumps(child(args.child, args.designs, args.designs_six, args.repeat, args.package, args.status_file)))
         return
+    import numpy as np
+
     d4, d6 = (256, 256) if args.quick else (args.designs, args.designs_six)
-    cases = {}
+    cases, statuses = {}, {}
     for name in ("fourbar_feasible", "fourbar_gapped", "watt_3pct", "watt_10pct"):
-        cases[name] = run_case(name, d4, d6, args.repeat)
+        cases[name], statuses[name] = run_case(name, d4, d6, args.repeat, args.package)
         c = cases[name]
         print(f"{name:18s} {c['designs']:6d} designs  first call {c['first_call_s']:6.2f} s  warm {c['warm_s']:7.3f} s  "
               f"{c['designs_per_s']:8.0f} designs/s  failed designs {c['failed_designs']}", flush=True)
@@ -155,7 +178,18 @@ def main(argv=None):
     if core:
         ratios["fourbar_feasible_sweep_vs_core_kernel"] = cases["fourbar_feasible"]["poses_per_s"] / core
         print(f"four-bar sweep {cases['fourbar_feasible']['poses_per_s']:.3g} poses/s, core stroke_kinematics {core:.3g} poses/s")
-    write_result("gaps", dict(cases=cases, ratios=ratios, quick=bool(args.quick)), out_dir=args.out)
+    if args.statuses:
+        np.savez(args.statuses, **statuses)
+    compared = None
+    if args.compare:
+        old = np.load(args.compare)
+        compared = {k: dict(points_differing=int(np.sum(old[k] != v)), designs_differing=int(np.sum(np.any(old[k] != v, axis=1))))
+                    for k, v in statuses.items() if k in old and old[k].shape == v.shape}  # fmt: skip
+        print("statuses differing from", args.compare, compared)
+    if args.package:
+        print("(run with the jaxmech of", args.package, "- results not written)")
+        return
+    write_result("gaps", dict(cases=cases, ratios=ratios, quick=bool(args.quick), statuses_vs=compared), out_dir=args.out)
 
 
 def argparse_hidden():

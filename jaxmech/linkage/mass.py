@@ -55,24 +55,25 @@ def mass_shape(names, points) -> tuple[str, tuple[str, ...]]:
     return "bar", (names[i], names[j])
 
 
-def shape_properties(kind: str, z, mass):
+def shape_properties(kind: str, z, mass, xp=jnp):
     """``(centre of mass (complex, m), inertia about it (kg m^2))`` of a uniform link of
     `mass` (kg) whose `kind` (``mass_shape``) has its corners at `z` (complex, m, in the
-    shape's order; numpy or traced): ``m L^2 / 12`` for a bar, the polygon's centroid and
-    polar second moment for a plate (a triangle: ``m (a^2 + b^2 + c^2) / 36``)."""
-    z = jnp.stack([jnp.asarray(v) for v in z]) if isinstance(z, (list, tuple)) else jnp.asarray(z)
+    shape's order): ``m L^2 / 12`` for a bar, the polygon's centroid and polar second
+    moment for a plate (a triangle: ``m (a^2 + b^2 + c^2) / 36``).  ``xp``: ``jax.numpy``
+    (traced, inside a model) or ``numpy`` (concrete values: no small programs compiled)."""
+    z = xp.stack([xp.asarray(v) for v in z]) if isinstance(z, (list, tuple)) else xp.asarray(z)
     if kind == "point":
-        return z[0], jnp.zeros((), jnp.real(z).dtype) * mass
+        return z[0], xp.zeros((), xp.real(z).dtype) * mass
     if kind == "bar":
-        return 0.5 * (z[0] + z[1]), mass * jnp.abs(z[1] - z[0]) ** 2 / 12.0
-    x, y = jnp.real(z), jnp.imag(z)
-    x1, y1 = jnp.roll(x, -1), jnp.roll(y, -1)
+        return 0.5 * (z[0] + z[1]), mass * xp.abs(z[1] - z[0]) ** 2 / 12.0
+    x, y = xp.real(z), xp.imag(z)
+    x1, y1 = xp.roll(x, -1), xp.roll(y, -1)
     c = x * y1 - x1 * y
-    area = 0.5 * jnp.sum(c)
-    gx = jnp.sum((x + x1) * c) / (6.0 * area)
-    gy = jnp.sum((y + y1) * c) / (6.0 * area)
+    area = 0.5 * xp.sum(c)
+    gx = xp.sum((x + x1) * c) / (6.0 * area)
+    gy = xp.sum((y + y1) * c) / (6.0 * area)
     # polar second moment of the polygon about the origin, then about its centroid
-    j_o = jnp.sum(c * (x * x + x * x1 + x1 * x1 + y * y + y * y1 + y1 * y1)) / 12.0
+    j_o = xp.sum(c * (x * x + x * x1 + x1 * x1 + y * y + y * y1 + y1 * y1)) / 12.0
     j_g = j_o - area * (gx * gx + gy * gy)
     return gx + 1j * gy, mass * j_g / area
 
@@ -82,7 +83,7 @@ def link_mass_properties(points, mass: float) -> tuple[complex, float]:
     `mass` (kg) through `points` (complex, m): ``shape_properties`` of its ``mass_shape``."""
     names = [str(k) for k in range(len(points))]
     kind, corners = mass_shape(names, points)
-    g, j = shape_properties(kind, [complex(points[int(n)]) for n in corners], float(mass))
+    g, j = shape_properties(kind, [complex(points[int(n)]) for n in corners], float(mass), np)
     return complex(g), float(j)
 
 
