@@ -70,7 +70,9 @@ def case(name: str, d4: int, d6: int):
     if name.startswith("fourbar"):
         ranges = {"b": (2.8, 3.2), "c": (2.3, 2.7)} if name == "fourbar_feasible" else {"a": (0.9, 1.6), "b": (2.5, 3.2), "c": (2.0, 2.7)}
         return "fourbar", random_designs(ranges, d4, seed=0)
-    scene = watt().scene(speed=2 * math.pi)
+    lk = watt()
+    # Linkage.scene (a checkout before it, --package: the function it calls)
+    scene = lk.scene(speed=2 * math.pi) if hasattr(lk, "scene") else __import__("jaxmech.scenes.linkage_scene", fromlist=["x"]).linkage_scene(lk, speed=2 * math.pi)
     d = scene.defaults
     # sorted: the same table for any order of the scene's parameters (a seeded draw per name)
     names = sorted(k for k in d if k.startswith("len_") and "_G_" not in k)[:3] if name == "watt_3pct" else sorted(geometric(scene))
