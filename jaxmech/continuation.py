@@ -296,6 +296,8 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     True or False forces one (False: the walk alone, for a caller that checks the statuses
     and repairs itself)."""
     us_, p, guess = prepare(mech, us, p, guess, options, u_what="us")
+    if not per_design and mech.dof == 1 and not isinstance(us, Mapping) and np.ndim(us) == 1:
+        us_ = us_.reshape((-1, 1))  # (N,): N points of the one input, a one-point stroke too
     if per_design:
         us_ = us_.reshape(np.shape(us))  # (D, N, dof) as given
         if us_.ndim != 3 or us_.shape[-1] != mech.dof or us_.shape[1] < 1:

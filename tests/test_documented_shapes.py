@@ -281,3 +281,27 @@ def test_forward_dynamics_checks_before_tracing():
         args = dict(u0=U, u_dot0=0.5, guess=G) | kwargs
         with pytest.raises(ValueError, match=rf"\b{name}\b.*shape"):
             jm.forward_dynamics(FB_MODEL, P, args["u0"], args["u_dot0"], args["guess"], h=0.01, steps=2)
+
+
+def test_a_one_sample_stroke_is_that_sample_of_a_longer_one():
+    """Every public entry point that takes a stroke (``(1,)`` and ``(1, dof)``) or a time
+    array (``(1,)``: times are 1-D) accepts one sample, and gives the numbers of that sample
+    inside a longer array (to rounding: a one-point stroke is solved from its guess, not
+    continued to).  A one-sample time array raised on dcea8c7."""
+    us = np.linspace(0.6, 1.4, 5)
+    guess = jnp.array([0.4, 1.7])
+    full_sol = jm.solve_stroke(FB, us, P, guess)
+    drive = jm.ConstantSpeed(0.6, 0.2)
+    t = np.linspace(0.0, 4.0, 5)
+    full_mo = jm.motion(FB, drive, t, P, guess)
+    full_id = jm.inverse_dynamics(FB_MODEL, drive, t, P, guess)
+    k = 3
+    g = np.asarray(full_sol.q[k])
+    for shape in ((1,), (1, 1)):
+        one = jm.solve_stroke(FB, us[k : k + 1].reshape(shape), P, g)
+        np.testing.assert_allclose(np.asarray(one.q), np.asarray(full_sol.q[k : k + 1]), rtol=0, atol=1e-12)
+    tk = t[k : k + 1]
+    mo = jm.motion(FB, drive, tk, P, g)
+    np.testing.assert_allclose(np.asarray(mo.q_ddot), np.asarray(full_mo.q_ddot[k : k + 1]), rtol=0, atol=1e-10)
+    inv = jm.inverse_dynamics(FB_MODEL, drive, tk, P, g)
+    np.testing.assert_allclose(np.asarray(inv.tau), np.asarray(full_id.tau[k : k + 1]), rtol=0, atol=1e-10)
