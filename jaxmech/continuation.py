@@ -49,7 +49,7 @@ from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
 from .stroke_point import checked_step, predict
 from .stroke_attach import Walked, attach, eager_attach
-from .stroke_repair import repair
+from .stroke_repair import failed_points, repair
 from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
 from .xla import jit, unfused
 
@@ -130,11 +130,6 @@ def walk_inputs(us_s, k: int, nblk: int) -> BlockInput:
     return BlockInput(u=block_layout(us_s, k, nblk), fresh=jnp.asarray(np.arange(nblk + 1) == 0))
 
 
-def any_failed(points: PointResults, valid, n):
-    """``(D, nb)``: the stroke points (the first ``n``) with finite inputs not solved."""
-    return valid & (points.status != Status.CONVERGED) & (jnp.arange(valid.shape[1]) < n)
-
-
 # --------------------------------------------------------------------------- the stroke program
 def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     """Strokes of D designs: ``us (nb, dof)`` shared or ``(D, nb, dof)`` one per design
@@ -154,7 +149,7 @@ def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     _, out = jax.lax.scan(functools.partial(walk_block, setup), init, walk_inputs(us_s, k, nblk))
     points = jax.tree_util.tree_map(lambda x: unblock(x, d, k, nb), out)
     if robust:
-        points = jax.lax.cond(jnp.any(any_failed(points, valid, n)), lambda x: repair(setup, us_s, x, valid, n, g0), lambda x: x, points)
+        points = jax.lax.cond(jnp.any(failed_points(points, valid, n)), lambda x: repair(setup, us_s, x, valid, n, g0), lambda x: x, points)
     return Walked(points, valid, setup.b0)
 
 

@@ -49,7 +49,7 @@ from .status import Status
 from .stroke_point import STARTS, fresh_starts, multistart, score, whole_turns
 from .stroke_stages import PointResults, StrokeSetup, point_derivatives
 
-__all__ = ["repair", "GROUP", "ROUNDS", "FRESH", "TWO_SIDED", "CONTINUE"]
+__all__ = ["repair", "failed_points", "GROUP", "ROUNDS", "FRESH", "TWO_SIDED", "CONTINUE"]
 
 #: Points solved at once, per design of the batch: a design whose whole stroke failed
 #: takes a few groups, a batch with few failures one.
@@ -76,6 +76,12 @@ class Context(NamedTuple):
     fail: jax.Array
     n: jax.Array
     g0: jax.Array
+
+
+def failed_points(points: PointResults, valid, n):
+    """``(D, nb)``: the stroke points (the first ``n``) with finite inputs (``valid``) that
+    are not ``CONVERGED``: what ``repair`` solves again."""
+    return valid & (points.status != Status.CONVERGED) & (jnp.arange(valid.shape[1]) < n)
 
 
 def _expand(mask, like):
@@ -113,18 +119,19 @@ def _nearest(conv, n):
 
 
 # --------------------------------------------------------------------------- the solves
-def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, mode, tried, guess) -> PointResults:
+def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, mode, tried, guess, near) -> PointResults:
     """The points ``todo (D, nb)`` solved on their own by ``stroke_point.multistart``: a
     fresh assembly around the nearest converged pose before the point (else the guess)
     where ``mode`` is ``FRESH``, the two-sided starts where ``TWO_SIDED``, one start from
     ``guess (D, nb, m)`` where ``CONTINUE`` (the same `mode` for every point).  In groups of
     ``GROUP`` points per design, only as many groups as there are points.  A point solved
     before (``tried (D, nb)``) takes the new answer only where it is better
-    (``stroke_point.score``)."""
+    (``stroke_point.score``).  ``near (D, nb, 2)``: ``_nearest`` of ``pts``'s converged
+    points (the caller has it)."""
     mech, opts = setup.mech, setup.options
     d, nb = ctx.fail.shape
     m = pts.q.shape[-1]
-    left, right = _nearest(pts.status == Status.CONVERGED, ctx.n)
+    left, right = near[..., 0], near[..., 1]
     size = d * nb
     group = min(size, GROUP * d)
     order = jnp.nonzero(todo.reshape(-1), size=size, fill_value=0)[0]
@@ -258,7 +265,7 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
     turns: ``unwrap``)."""
     d, nb = valid.shape
     i = jnp.arange(nb)
-    fail = valid & (pts.status != Status.CONVERGED) & (i < n)
+    fail = failed_points(pts, valid, n)
     ctx = Context(us, fail, n, g0)
     walked = pts
     ends_of_stroke = fail & ((i == 0) | (i == n - 1))[None, :]
@@ -277,7 +284,7 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
         todo = where(kind == FRESH, todo_fresh, where(kind == CONTINUE, step & ~st.filled, todo_two))
         # a fill writes only what it converges (a better answer than any failure)
         tried = where(kind == CONTINUE, True, solved)
-        pts = solve_points(setup, ctx, st.pts, todo, kind, tried, guess)
+        pts = solve_points(setup, ctx, st.pts, todo, kind, tried, guess, near)
         newly = todo & (pts.status == Status.CONVERGED)
         filled = st.filled | (todo & (kind == CONTINUE))
         ends = where((todo & (kind == TWO_SIDED))[..., None], near, st.ends).astype(st.ends.dtype)
