@@ -295,36 +295,47 @@ def _pylinkage_fourbar():
     return pl.Linkage([o2, o4, a, b, p], name="fourbar")
 
 
+def _timed_rms(design, targets, alpha) -> float:
+    """rms distance (m) of a design's coupler point at the prescribed crank angles `alpha`
+    from the targets (inf where it cannot be assembled): the error measure of the made-up
+    curves, timed."""
+    from jaxmech.design import coupler_curve
+
+    P = coupler_curve(design, alpha)
+    return float(np.sqrt(np.mean(np.abs(P - targets) ** 2))) if np.all(np.isfinite(P)) else np.inf
+
+
 def bench_path_synthesis(n_targets=10, particles=100, iterations=(100, 300, 1000)):
-    """Four-bar path synthesis on two target curves: gradient least squares (exact
-    implicit Jacobians, trust region, 8 random starts; compile included) against
-    pylinkage's particle swarm (``particle_swarm_optimization``, local-best ring PSO), with
-    the same 9 unknowns, the same prescribed crank angles and the same error measure (rms
-    distance to the targets; the swarm's score evaluates it by numpy circle intersection,
-    faster than pylinkage's own simulation, which favours the swarm)."""
-    from examples import path_synthesis as ps
+    """Four-bar path synthesis on two target curves: ``jaxmech.design.synthesize_path``
+    (batched Levenberg-Marquardt with exact Jacobians, its default starts, prescribed crank
+    angles; compile included on the first curve) against pylinkage's particle swarm
+    (``particle_swarm_optimization``, local-best ring PSO) on the same 9 unknowns, the same
+    prescribed crank angles and the same error measure (rms distance to the targets at those
+    crank angles; the swarm's score evaluates it by numpy circle intersection, faster than
+    pylinkage's own simulation, which favours the swarm; the swarm has the +1 assembly mode,
+    the synthesis both)."""
+    import jax
     from pylinkage import particle_swarm_optimization
+
+    from examples import path_synthesis as ps
+    from jaxmech.design import synthesize_path
+    from jaxmech.design.synthesis import PARAMS
+    from jaxmech.design.synthesis_lsq import evaluator
 
     linkage = _pylinkage_fourbar()
     rows = {}
+    evaluator.cache_clear()  # the first curve's time includes the compile
+    jax.clear_caches()
     for kind in ("coupler", "ellipse"):
         targets, alpha = ps.target_curve(kind, n_targets)
         size = float(np.max(np.abs(targets - np.mean(targets))))
         c = np.mean(targets)
 
         def rms(dims):
-            p = dict(zip(ps.PARAMS, dims))
+            p = dict(zip(PARAMS, dims))
             if min(p["a"], p["b"], p["c"], p["d"]) <= 0:
                 return np.inf
-            th2 = alpha - p["phi"]
-            A = p["a"] * np.exp(1j * th2)
-            AO = p["d"] - A
-            cos_ = (p["b"] ** 2 + np.abs(AO) ** 2 - p["c"] ** 2) / (2 * p["b"] * np.abs(AO))
-            if np.any(np.abs(cos_) > 1):
-                return np.inf  # cannot be assembled at some target
-            th3 = np.angle(AO) + np.arccos(cos_)
-            P = p["x0"] + 1j * p["y0"] + np.exp(1j * p["phi"]) * (A + (p["px"] + 1j * p["py"]) * np.exp(1j * th3))
-            return float(np.sqrt(np.mean(np.abs(P - targets) ** 2)))
+            return _timed_rms({**p, "mode": 1.0}, targets, alpha)
 
         lo = [c.real - 3 * size, c.imag - 3 * size, -np.pi, 0.05 * size, 0.1 * size, 0.1 * size, 0.1 * size, -3 * size, -3 * size]
         hi = [c.real + 3 * size, c.imag + 3 * size, np.pi, 1.5 * size, 6 * size, 6 * size, 6 * size, 3 * size, 3 * size]
@@ -336,21 +347,23 @@ def bench_path_synthesis(n_targets=10, particles=100, iterations=(100, 300, 1000
             wall = time.perf_counter() - t0
             pso.append({"iterations": it, "particles": particles, "error": rms(ens.dimensions[0]), "wall_s": wall})
             print(f"synthesis {kind}: PSO {it} iterations: rms {pso[-1]['error']:.3g} m in {wall:.2f} s", flush=True)
-        # Gradient: a fresh compile each curve would be unfair to neither: the first curve
-        # compiles, the second reuses (same N, same mode): both recorded.
-        grad = ps.synthesize(targets, alpha, starts=8, seed=0)
-        grad_free = ps.synthesize(targets, None, starts=8, seed=0)
+        grad = synthesize_path(targets, "closed", alpha=alpha)
+        grad_error = _timed_rms(grad.design, targets, alpha) if grad.design is not None else np.inf
+        free = synthesize_path(targets, "closed")
         best_pso = min(pso, key=lambda r: r["error"])
         rows[kind] = {
-            "targets": n_targets, "error_measure": "rms distance of the coupler point to the targets (m)",
-            "gradient": {"error": grad.error, "wall_s": grad.wall_s, "compile_s": grad.compile_s, "evaluations": grad.evaluations,
-                         "method": "scipy least_squares (trf), exact implicit Jacobians, 8 random starts, prescribed crank angles"},
-            "gradient_free_crank_angles": {"error": grad_free.error, "wall_s": grad_free.wall_s, "compile_s": grad_free.compile_s},
+            "targets": n_targets, "error_measure": "rms distance of the coupler point to the targets at the prescribed crank angles (m)",
+            "gradient": {"error": grad_error, "wall_s": grad.wall_s, "compile_s": grad.compile_s, "starts": grad.starts,
+                         "starts_at_best": grad.starts_at_best(),
+                         "method": "jaxmech.design.synthesize_path(targets, 'closed', alpha): batched Levenberg-Marquardt, "
+                                   "exact Jacobians, default starts, prescribed crank angles"},
+            "gradient_free_crank_angles": {"error": free.error, "wall_s": free.wall_s, "compile_s": free.compile_s,
+                                           "error_measure": "path_error: rms distance to the coupler curve (m)"},
             "pylinkage_pso": pso,
-            "error_ratio_pso_best_to_gradient": best_pso["error"] / max(grad.error, 1e-300),
+            "error_ratio_pso_best_to_gradient": best_pso["error"] / max(grad_error, 1e-300),
             "time_ratio_pso_best_to_gradient": best_pso["wall_s"] / grad.wall_s,
         }
-        print(grad.report, flush=True)
+        print(grad.report(), flush=True)
     return rows
 
 
@@ -577,6 +590,7 @@ def bench_path_synthesis_literature(names=None, particles=100):
 
     from jaxmech.design import synthesis as syn
     from jaxmech.design.synthesis import path_error, synthesize_path
+    from jaxmech.design.synthesis_lsq import evaluator
 
     linkage = _pylinkage_fourbar()
     rows = []
@@ -586,7 +600,7 @@ def bench_path_synthesis_literature(names=None, particles=100):
         load = list(os.getloadavg())  # other processes share the 2 cores: timings under load are inflated
         published = path_error(solution, targets, kind, min_transmission=MIN_TRANSMISSION)
         # jaxmech, compile included
-        syn._evaluator.cache_clear()
+        evaluator.cache_clear()  # its compiled program dropped: the row's time includes the compile
         jax.clear_caches()
         res = synthesize_path(targets, kind, min_transmission=MIN_TRANSMISSION)
         print(res.report(), flush=True)
@@ -654,7 +668,7 @@ def bench_path_synthesis_literature(names=None, particles=100):
                                             "(evenly spaced along the list); every solution scored on all N; error and wall_s "
                                             "of the better run"},
             "pylinkage_swarm": {"error": pso.error, "wall_s": pso_s, "iterations": its, "particles": particles},
-            "at_or_below_published": bool(res.error <= published.error),
+            "starts_at_best": res.starts_at_best(), "at_or_below_published": bool(res.error <= published.error),
             # lower error at equal time or the same error sooner: Burmester's time is its own (a
             # jaxmech run, the full one or the quick one, below its error within its time; or no
             # feasible Burmester design at all); the swarm ran at least as long as jaxmech

@@ -2,7 +2,9 @@
 flap's travel and peak torque, first order (``jaxmech.design.tolerance.analyse``) against batched
 Monte Carlo (``jaxmech.design.tolerance.monte_carlo``).
 
-- ``fourbar_figures``: for ``path_synthesis.GENERAL_FOURBAR`` at the crank angle
+- ``GENERAL_FOURBAR``: a four-bar anywhere in the plane through the engine's position solve
+  (``jaxmech.solve_one``, implicit-function derivatives); ``pose`` solves one crank angle.
+- ``fourbar_figures``: for ``GENERAL_FOURBAR`` at the crank angle
   ``FOURBAR_ALPHA``: the coupler point's position (``x``, ``y``, m: its path deviation
   components), the rocker angle ``theta4`` (rad) and the transmission angle (rad).
 - ``flap_figures``: for the MSD double flap (``design_problems.flap_state``): second-flap
@@ -21,10 +23,58 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxmech.design.tolerance import analyse, monte_carlo
+from jaxmech.mechanism import Mechanism, cis
+from jaxmech.positions import solve_one
+from jaxmech.status import Status
 
-from .path_synthesis import PARAMS, pose
+__all__ = ["FOURBAR_DESIGNS", "FOURBAR_ALPHA", "GENERAL_FOURBAR", "PARAMS", "fourbar_figures", "flap_figures", "pose",
+           "relative_tolerances", "tolerance_study"]
 
-__all__ = ["FOURBAR_DESIGNS", "FOURBAR_ALPHA", "fourbar_figures", "flap_figures", "relative_tolerances", "tolerance_study"]
+PARAMS = ("x0", "y0", "phi", "a", "b", "c", "d", "px", "py")
+
+
+def _coupler(q, u, p):
+    return p.x0 + 1j * p.y0 + cis(p.phi) * (p.a * cis(u.theta2) + (p.px + 1j * p.py) * cis(q.theta3))
+
+
+#: A four-bar anywhere in the plane: crank a at (x0, y0), ground d at angle phi, coupler
+#: b, rocker c; coupler point (px, py) in the coupler's frame (x along A->B).  Angles
+#: theta2..4 from the ground line; the open assembly (sin(theta4 - theta3) > 0).
+GENERAL_FOURBAR = Mechanism(
+    name="general_fourbar",
+    coords=("theta3", "theta4"),
+    inputs=("theta2",),
+    params=PARAMS,
+    lengths=("a", "b", "c", "d", "px", "py", "x0", "y0"),
+    signed=("px", "py", "x0", "y0"),
+    constraints=lambda q, u, p: [p.a * cis(u.theta2) + p.b * cis(q.theta3) - p.c * cis(q.theta4) - p.d],
+    points={"P": _coupler},
+    branch=lambda q, u, p: jnp.sin(q.theta4 - q.theta3),
+)
+
+
+def _guess(p, theta2):
+    # Open assembly by circle intersection: B on circles about A (radius b) and O4 (c).
+    A = p["a"] * jnp.exp(1j * theta2)
+    AO = p["d"] - A
+    dist = jnp.abs(AO)
+    cos_ = (p["b"] ** 2 + dist**2 - p["c"] ** 2) / (2 * p["b"] * dist)
+    theta3 = jnp.angle(AO) + jnp.arccos(cos_)  # NaN where the loop cannot close
+    B = A + p["b"] * jnp.exp(1j * theta3)
+    return jnp.stack([theta3, jnp.angle(B - p["d"])])
+
+
+def pose(p, theta2):
+    """``(q, P, ok)`` at ground-frame crank angle ``theta2`` (rad): ``q = (theta3,
+    theta4)`` by the engine's solve (differentiable by the implicit rule), the coupler
+    point ``P`` (complex, m), and whether the design assembles there (else placeholders)."""
+    g = _guess(jax.lax.stop_gradient(p), theta2)
+    assembled = jnp.all(jnp.isfinite(g))
+    sol = solve_one(GENERAL_FOURBAR, jnp.reshape(theta2, (1,)), p, jnp.where(assembled, g, 0.0))
+    ok = assembled & (sol.status == Status.CONVERGED)
+    q = jnp.where(ok, sol.q, 0.0)
+    P = GENERAL_FOURBAR.point("P", q, jnp.reshape(theta2, (1,)), p)
+    return q, P, ok
 
 FOURBAR_ALPHA = np.deg2rad(60.0)  #: absolute crank angle of the four-bar figures (rad)
 

@@ -9,8 +9,12 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+from matplotlib.figure import Figure  # noqa: E402
+
 from examples import path_synthesis as ps  # noqa: E402
 from examples import tolerance_study as ts  # noqa: E402
+
+from jaxmech.design import synthesize_path  # noqa: E402
 from jaxmech.design.tolerance import analyse  # noqa: E402
 
 MC_SAMPLES = 10_000
@@ -21,24 +25,32 @@ STD_RTOL = 0.05
 
 
 def _numpy_coupler(p, alpha):
-    # Independent of the engine: open-assembly circle intersection in numpy.
+    # Independent of the library: circle intersection in numpy on the design's assembly mode
+    # (the sign of sin(theta4 - theta3)).
     th2 = alpha - p["phi"]
     A = p["a"] * np.exp(1j * th2)
     AO = p["d"] - A
     cos_ = (p["b"] ** 2 + np.abs(AO) ** 2 - p["c"] ** 2) / (2 * p["b"] * np.abs(AO))
-    th3 = np.angle(AO) + np.arccos(cos_)
+    th3 = np.angle(AO) + p.get("mode", 1.0) * np.arccos(cos_)
     return p["x0"] + 1j * p["y0"] + np.exp(1j * p["phi"]) * (A + (p["px"] + 1j * p["py"]) * np.exp(1j * th3))
 
 
 def test_path_synthesis_passes_through_a_reachable_curve():
     targets, alpha = ps.target_curve("coupler", 10)
-    res = ps.synthesize(targets, alpha, starts=4, seed=0)
-    pts = _numpy_coupler(res.params, alpha)
-    assert ps.rms_error(pts, targets) < 1e-9  # through every target, to the solver's precision
-    assert res.error == pytest.approx(ps.rms_error(pts, targets), abs=1e-12)
-    assert "best rms error" in res.report
-    with pytest.raises(ValueError, match="alpha must have"):
-        ps.synthesize(targets, alpha[:-1])
+    np.testing.assert_allclose(targets, _numpy_coupler(ps.CRANK_ROCKER, alpha), rtol=0, atol=1e-13)
+    res = synthesize_path(targets, "closed", alpha=alpha, starts=256, shapes=1000)  # the library's function
+    pts = _numpy_coupler(res.design, alpha)
+    assert np.max(np.abs(pts - targets)) < 1e-9  # through every target at its crank angle
+    assert res.error < 1e-9 and res.starts_at_best() >= 1
+    # the drawing's pins: A on the crank circle, B at b from A and c from the rocker pivot
+    O2, O4, A, B = ps.pins(res.design, alpha)
+    d = res.design
+    np.testing.assert_allclose(np.abs(A - O2), d["a"], rtol=1e-12)
+    np.testing.assert_allclose(np.abs(B - A), d["b"], rtol=1e-12)
+    np.testing.assert_allclose(np.abs(B - O4), d["c"], rtol=1e-12)
+    ax = Figure().subplots()
+    ps.draw(ax, res, np.stack([targets.real, targets.imag], axis=1), "timed")  # (N, 2) targets drawn as complex ones
+    assert len(ax.lines) == 1 + 10 + 3 and "starts at the best" in ax.get_title()
 
 
 def test_tolerance_first_order_matches_monte_carlo_for_small_tolerances():

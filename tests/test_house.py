@@ -90,25 +90,90 @@ def test_the_function_rules_see_what_they_should():
     assert long_tuple_returns("def f(a):\n    return (a, a, a, *a)\n") == []
 
 
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def _is_package_module(dotted: str) -> bool:
+    """``jaxmech.a.b`` names a module or a package of this checkout (not a function or a class)."""
+    path = ROOT.joinpath(*dotted.split("."))
+    return dotted.split(".")[0] == "jaxmech" and (path.with_suffix(".py").is_file() or (path / "__init__.py").is_file())
+
+
+def _imported_from(node: ast.ImportFrom, package: str | None) -> str | None:
+    """The dotted jaxmech module a ``from ... import`` reads from (a relative import resolved
+    against `package`, the importing module's package), or None for another library."""
+    if node.level > 0:
+        if package is None:
+            return None
+        base = package.split(".")[: len(package.split(".")) - node.level + 1]
+        return ".".join(base + ([node.module] if node.module else []))
+    return node.module if (node.module or "").split(".")[0] == "jaxmech" else None
+
+
+def private_crossings(source: str, where: str = "", package: str | None = None) -> list:
+    """Every use of a private jaxmech name from outside its module: ``from jaxmech.x import
+    _name`` (or ``from . import _name`` inside the package, `package` being the importing
+    module's), and ``module._name`` / ``module._name.attr`` of a name bound to a jaxmech
+    module (``from jaxmech.design import synthesis as syn``, ``import jaxmech.x as y``,
+    ``from . import x``).  A private name of the module itself, or a dunder, is fine."""
+    tree = ast.parse(source)
+    found, modules = [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (base := _imported_from(node, package)) is not None:
+            for a in node.names:
+                if _private(a.name):
+                    found.append(f"{where}:{node.lineno} imports {a.name}")
+                elif _is_package_module(f"{base}.{a.name}"):
+                    modules.add(a.asname or a.name)
+        elif isinstance(node, ast.Import):
+            modules.update(a.asname or "jaxmech" for a in node.names if a.name.split(".")[0] == "jaxmech")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr):
+            root = node.value
+            while isinstance(root, ast.Attribute):
+                root = root.value
+            if isinstance(root, ast.Name) and root.id in modules:
+                found.append(f"{where}:{node.lineno} uses {ast.unparse(node)}")
+    return found
+
+
 def test_no_private_name_crosses_a_module_boundary():
-    """``from .x import _name`` and ``module._name`` of a package module are refused (a
-    private name of the module itself, or a dunder, is fine)."""
+    """Inside the package: ``from .x import _name`` and ``module._name`` of a package module
+    are refused."""
     crossings = []
     for f in _modules():
-        tree = ast.parse(f.read_text())
-        modules = set()  # names bound to jaxmech modules by `from . import x` / `import jaxmech.x as y`
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and (node.level > 0 or (node.module or "").startswith("jaxmech")):
-                for a in node.names:
-                    if a.name.startswith("_") and not a.name.startswith("__"):
-                        crossings.append(f"{f.relative_to(ROOT)}:{node.lineno} imports {a.name}")
-                    if node.module is None:
-                        modules.add(a.asname or a.name)
-        for node in ast.walk(tree):
-            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules
-                    and node.attr.startswith("_") and not node.attr.startswith("__")):
-                crossings.append(f"{f.relative_to(ROOT)}:{node.lineno} uses {node.value.id}.{node.attr}")
+        rel = f.relative_to(ROOT).with_suffix("")
+        package = ".".join(rel.parts[:-1])  # a module's package; an __init__'s own
+        crossings += private_crossings(f.read_text(), str(f.relative_to(ROOT)), package)
     assert not crossings, crossings
+
+
+def test_benchmarks_and_examples_use_public_names_only():
+    """What a user runs (``benchmarks/*.py``, ``examples/*.py``) reaches jaxmech through its
+    public names: a private one can be renamed at any time (``benchmarks/design.py`` once
+    called a renamed ``synthesis._evaluator`` and its literature rows stopped running)."""
+    files = sorted((ROOT / "benchmarks").glob("*.py")) + sorted((ROOT / "examples").glob("*.py"))
+    assert len(files) > 10
+    crossings = [x for f in files for x in private_crossings(f.read_text(), str(f.relative_to(ROOT)))]
+    assert not crossings, crossings
+
+
+def test_the_private_name_rule_sees_what_it_should():
+    """The check above on code written to break it, and on code that does not."""
+    assert private_crossings("from jaxmech.design.synthesis import _denormalise as d\n") == [":1 imports _denormalise"]
+    assert private_crossings("from jaxmech.design import synthesis as syn\nsyn._evaluator.cache_clear()\n") == \
+        [":2 uses syn._evaluator"]
+    assert private_crossings("import jaxmech.design.synthesis as s\ns._x\n") == [":2 uses s._x"]
+    assert private_crossings("import jaxmech\njaxmech.design._hidden\n") == [":2 uses jaxmech.design._hidden"]
+    assert private_crossings("from .. import xla\nxla._cache\n", package="jaxmech.design") == [":2 uses xla._cache"]
+    assert private_crossings("from .synthesis_lsq import _x\n", package="jaxmech.design") == [":1 imports _x"]
+    # public names, dunders, another library's private names, a function (not a module) of jaxmech
+    assert private_crossings("from jaxmech.design import synthesis as syn\nsyn.PARAMS, syn.__name__\n") == []
+    assert private_crossings("import numpy as np\nnp._NoValue\nfrom numpy import _globals\n") == []
+    assert private_crossings("from jaxmech.design.synthesis_lsq import evaluator\nevaluator.cache_clear()\n") == []
+    assert private_crossings("from jaxmech.design import path_error as pe\npe._x\n") == []
+    assert private_crossings("from ._x import y\n") == []  # a relative import outside the package: not jaxmech's
 
 
 def test_no_absolute_machine_path_in_the_repository():

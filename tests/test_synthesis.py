@@ -202,3 +202,31 @@ def test_an_open_arc_on_one_mode_is_found():
     res = synthesize_path(targets, "open", **FAST)
     assert res.error < 1e-4 and res.path.feasible
     _assert_feasible(res.design, res.path, "open")
+
+
+# --------------------------------------------------------------------------- the targets' two shapes
+def test_path_error_reads_real_rows_as_the_same_points_as_complex():
+    """12 points on the crank-rocker's own coupler curve (by the numpy four-bar here): the
+    ``(N, 2)`` rows and the complex ``(N,)`` array are the same targets, at distance ~0; any
+    other shape is refused, naming the parameter and the accepted shapes."""
+    alpha = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    _, _, on_curve, ok = _pins(CRANK_ROCKER, alpha)
+    assert ok.all()
+    rows = np.stack([on_curve.real, on_curve.imag], axis=1)  # (12, 2)
+    as_complex = path_error(CRANK_ROCKER, on_curve, "closed")
+    as_rows = path_error(CRANK_ROCKER, rows, "closed")
+    assert as_complex.error < 1e-12 and as_complex.feasible
+    assert as_rows.error == as_complex.error
+    np.testing.assert_array_equal(as_rows.distances, as_complex.distances)
+    np.testing.assert_array_equal(as_rows.alpha, as_complex.alpha)
+    assert path_error(CRANK_ROCKER, rows.tolist(), "closed").error == as_complex.error  # a list of (x, y) pairs
+    # shapes that would be read as other points: refused
+    bad = {"real (24,)": rows.reshape(-1), "real (2, 12)": rows.T, "complex (12, 2)": rows + 0j,
+           "real (12, 3)": np.concatenate([rows, rows[:, :1]], axis=1), "complex (12, 1)": on_curve[:, None]}
+    for label, targets in bad.items():
+        with pytest.raises(ValueError, match=r"path_error: targets must be complex \(N,\) .* or real \(N, 2\)"):
+            path_error(CRANK_ROCKER, targets, "closed")
+        with pytest.raises(ValueError, match=r"synthesize_path: targets must be complex \(N,\)"):
+            synthesize_path(targets, "closed")
+    with pytest.raises(ValueError, match="not finite"):
+        path_error(CRANK_ROCKER, np.where(np.arange(12) == 3, np.nan, on_curve), "closed")

@@ -5,7 +5,7 @@ A four-bar anywhere in the plane: crank ``a`` about ``(x0, y0)``, ground line ``
 ``phi``, coupler ``b``, rocker ``c``, coupler point ``(px, py)`` in the coupler's frame (x
 along crank pin A -> coupler-rocker pin B), and the assembly ``mode`` (+1 or -1), the sign of
 the loop's Jacobian determinant, ``sin(theta4 - theta3)`` (+1: the "open" assembly of
-``examples/path_synthesis.GENERAL_FOURBAR``; the C1 circuit of four-bar-rs).  A design is a
+``examples/tolerance_study.GENERAL_FOURBAR``; the C1 circuit of four-bar-rs).  A design is a
 ``{name: float}`` over ``PARAMS`` and ``"mode"``; crank angles ``alpha`` are absolute (from
 the x axis).  The RRR dyad is solved in closed form (the circle intersection, on the
 design's mode), so a curve and its derivatives are exact.
@@ -52,7 +52,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 __all__ = ["CURVES", "PARAMS", "TAU", "PathError", "CrankInterval", "coupler_curve", "cos_transmission_limit", "crank_interval", "crank_intervals",
-           "fully_rotatable", "local_point", "path_error", "transmission_angle"]
+           "fully_rotatable", "local_point", "path_error", "read_targets", "transmission_angle"]
 
 PARAMS = ("x0", "y0", "phi", "a", "b", "c", "d", "px", "py")
 CURVES = ("closed", "open", "partial")
@@ -181,6 +181,32 @@ def transmission_angle(design, alpha):
     return np.minimum(mu, 180.0 - mu)
 
 
+# =========================================================================== the targets
+def read_targets(targets, what: str) -> np.ndarray:
+    """Target points as complex ``(N,)`` (``x + i y``, length units) from either accepted
+    form: complex ``(N,)``, or real ``(N, 2)`` with one ``(x, y)`` row per point.
+
+    Any other shape or type is refused with a ``ValueError`` naming `what` (the calling
+    function): a real ``(N,)`` array (x alone? a flattened ``(x, y)`` list?), ``(2, N)``
+    columns or complex ``(N, 2)`` would otherwise be read as different points without a
+    word.  Non-finite points are refused too."""
+    T = np.asarray(targets)
+    accepted = "complex (N,) (x + 1j*y) or real (N, 2) (one (x, y) row per point)"
+    if T.dtype.kind not in "iufc":
+        raise ValueError(f"{what}: targets must be numbers, {accepted}; got dtype {T.dtype}")
+    if T.ndim == 2 and T.shape[1] == 2 and T.dtype.kind != "c":
+        T = T[:, 0].astype(float) + 1j * T[:, 1].astype(float)
+    elif not (T.ndim == 1 and T.dtype.kind == "c"):
+        kind = "complex" if T.dtype.kind == "c" else "real"
+        hint = " (for (2, N) columns pass targets.T)" if T.ndim == 2 and T.shape[0] == 2 else ""
+        raise ValueError(f"{what}: targets must be {accepted}; got {kind} {T.shape}{hint}")
+    T = T.astype(complex)
+    if T.size == 0 or not np.all(np.isfinite(T)):
+        raise ValueError(f"{what}: targets must be at least one finite point, got {T.size} with "
+                         f"{int(np.sum(~np.isfinite(T)))} not finite")
+    return T
+
+
 # =========================================================================== the error
 @dataclasses.dataclass(frozen=True)
 class PathError:
@@ -295,7 +321,11 @@ def _in_order(theta, periodic_once: bool, full: bool, tol=np.radians(2.0)) -> bo
 
 def path_error(design, targets, curve: str = "closed", *, min_transmission: float = 5.0, ordered: bool = False,
                samples: int = 720) -> PathError:
-    """rms distance from `targets` (complex ``(N,)``) to the design's feasible coupler curve.
+    """rms distance from `targets` to the design's feasible coupler curve (length units, those of
+    the design and the targets).
+
+    - `targets`: complex ``(N,)`` (``x + 1j*y``) or real ``(N, 2)`` (one ``(x, y)`` row per
+      point), as ``synthesize_path`` takes them; any other shape is a ``ValueError``.
 
     - `curve`: ``"closed"`` or ``"partial"`` (the crank must turn fully; one turn is the
       curve) or ``"open"`` (each toggle-free crank interval of the design's mode is a
@@ -310,7 +340,7 @@ def path_error(design, targets, curve: str = "closed", *, min_transmission: floa
       resolves features down to 1/720 of the crank's range).
     """
     p = _check_design(design)
-    targets = np.asarray(targets, complex).reshape(-1)
+    targets = read_targets(targets, "path_error")
     if curve not in CURVES:
         raise ValueError(f"path_error: curve must be one of {CURVES}, got {curve!r}")
     n = targets.size

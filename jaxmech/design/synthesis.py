@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from .coupler_path import (CURVES, PARAMS, TAU, PathError, cos_transmission_limit, coupler_curve, crank_interval, crank_intervals,
-                           fully_rotatable, local_point, path_error, transmission_angle)
+                           fully_rotatable, local_point, path_error, read_targets, transmission_angle)
 from .synthesis_lsq import Pool, Problem, basin_hopping, evaluator, successive_halving
 from .synthesis_lsq import polish as polish_start
 from .synthesis_starts import placed_starts
@@ -67,6 +67,9 @@ class PathSynthesis:
       where it stopped (successive halving stops most of them early; ``inf``: infeasible).
     - `wall_s` (everything, compile included), `compile_s` (0 when an earlier call compiled
       the same program), `iterations`: ``(starts,)`` Levenberg-Marquardt steps of each.
+
+    ``starts_at_best()`` counts the starts that ended at the best answer: many (the optimum
+    was found from many places) is more trust than one (a lucky start: try another `seed`).
     """
 
     design: dict | None
@@ -81,10 +84,22 @@ class PathSynthesis:
     wall_s: float
     compile_s: float
 
+    def starts_at_best(self, rtol: float = 1e-3) -> int:
+        """Starts whose own error (`start_errors`, length units) ended within `rtol` (relative)
+        of the best start's, or within 1e-9 of the design's longest link of it (an exact fit,
+        where relative differences of round-off mean nothing); 0 when no start is feasible.
+        Successive halving runs only the best few to convergence, so this counts those (and
+        the basin-hopping copies) that reached the best."""
+        finite = self.start_errors[np.isfinite(self.start_errors)]
+        if self.design is None or finite.size == 0:
+            return 0
+        scale = max(self.design[k] for k in ("a", "b", "c", "d"))
+        return int(np.sum(finite <= finite.min() * (1 + rtol) + 1e-9 * scale))
+
     def report(self) -> str:
         lines = [f"path synthesis ({self.curve} curve, {'prescribed' if self.timed else 'free'} crank angles): "
-                 f"rms distance to the curve {self.error:.6g}; {self.feasible_starts}/{self.starts} starts feasible; "
-                 f"{self.wall_s:.2f} s ({self.compile_s:.2f} s compiling)"]
+                 f"rms distance to the curve {self.error:.6g}; {self.feasible_starts}/{self.starts} starts feasible, "
+                 f"{self.starts_at_best()} at the best (0.1 %); {self.wall_s:.2f} s ({self.compile_s:.2f} s compiling)"]
         if self.design is not None:
             lines.append("  " + ", ".join(f"{k} = {v:.6g}" for k, v in self.design.items()))
             lines.append(f"  max distance {self.path.max_distance:.3g}, sum of squares {self.path.sum_squares:.4g}, "
@@ -126,14 +141,12 @@ def best_scored(pb: Problem, pool: Pool, start_err, T, centre, size, score: int,
 
 
 def checked_targets(targets, alpha, modes):
-    """``(T (N,) complex, alpha (N,) or None, modes)`` checked: ``ValueError`` for fewer than
-    3 finite targets, `alpha` not of the targets' shape, modes not +-1."""
-    T = np.asarray(targets)
-    if T.ndim == 2 and T.shape[1] == 2 and not np.iscomplexobj(T):
-        T = T[:, 0] + 1j * T[:, 1]
-    T = np.asarray(T, complex).reshape(-1)
+    """``(T (N,) complex, alpha (N,) or None, modes)`` checked: ``ValueError`` for targets of
+    neither accepted shape (``read_targets``, as ``path_error`` reads them), fewer than 3,
+    `alpha` not of the targets' shape, modes not +-1."""
+    T = read_targets(targets, "synthesize_path")
     n = T.size
-    if n < 3 or not np.all(np.isfinite(T)):
+    if n < 3:
         raise ValueError(f"synthesize_path: need at least 3 finite target points, got {n}")
     if alpha is not None:
         alpha = np.asarray(alpha, float)
@@ -153,7 +166,8 @@ def synthesize_path(targets, curve: str = "closed", alpha=None, *, starts: int |
 
     **Arguments**
 
-    - `targets`: complex ``(N,)`` (or real ``(N, 2)``), N >= 3, in path order.
+    - `targets`: complex ``(N,)`` (``x + 1j*y``) or real ``(N, 2)`` (one ``(x, y)`` row per
+      point), N >= 3, in path order (length units: the design comes back in them).
     - `curve`: ``"closed"``, ``"open"`` or ``"partial"`` (module docstring).
     - `alpha`: ``(N,)`` prescribed absolute crank angles (rad), or None (each target's crank
       angle is an unknown).  With `alpha` the error is still ``path_error``'s (the design's
