@@ -62,7 +62,7 @@ from .cache import enable_compile_cache as enable_compile_cache
 
 
 #: Names whose modules load on first use (``jaxmech.linkage``: 15 ms of the import).
-_LAZY = {"Linkage": "linkage", "load_linkage": "linkage"}
+_LAZY = {"Linkage": "linkage", "load_linkage": "linkage", "drawing_from_lengths": "linkage"}
 
 
 def __getattr__(name):
