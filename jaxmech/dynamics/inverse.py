@@ -23,11 +23,24 @@ from ..options import SolverOptions
 from ..positions import solve_one
 from ..status import Status
 from ..xla import jit
+from .joints import Prismatic, Slot, joint_name
 from .model import Model, mechanism_params, prepare_params
-from .reactions import joint_reactions
+from .reactions import joint_axes, joint_reactions
 from .virtual_power import balance, loaded_state
 
-__all__ = ["InverseDynamics", "inverse_dynamics", "inverse_dynamics_at", "inverse_dynamics_batch", "statics"]
+__all__ = ["InverseDynamics", "JointBodies", "inverse_dynamics", "inverse_dynamics_at", "inverse_dynamics_batch", "statics"]
+
+
+class JointBodies(NamedTuple):
+    """A joint of a result (``InverseDynamics.joint_bodies``): its name, its first and
+    second bodies (its reaction is the first's force on the second), and the index of the
+    input it drives where it is a driven slider (-1 otherwise: a driven pin's effort is a
+    torque, an actuator's push is its reaction already)."""
+
+    joint: str
+    first: str
+    second: str
+    drive: int
 
 
 @jax.tree_util.register_dataclass
@@ -45,6 +58,11 @@ class InverseDynamics:
     - `joints`: for a model with joints, ``{joint: F}``: the force (N, complex, global) that
       the joint's first body exerts on its second (``dynamics.joints``), from the per-body
       Newton-Euler equations; `joint_moments`: ``{joint: M}`` (N m) of prismatic joints.
+      Per link: ``force_on(link, joint)``; a slider's or slot's ``normal_force(joint)``.
+    - `joint_normals`: ``{joint: n}`` the unit normal (complex, global) of every slider's
+      guide and every slot at each sample, along which its normal force acts.
+    - `joint_bodies`: a ``JointBodies`` (joint, first and second body, the driven slider's
+      input index) per joint, in the order of ``Model.joints`` (static).
     - `status`: position-solve ``Status`` per sample (NaN results where not CONVERGED).
     """
 
@@ -61,7 +79,9 @@ class InverseDynamics:
     points: dict = dataclasses.field(default_factory=dict)
     joints: dict = dataclasses.field(default_factory=dict)
     joint_moments: dict = dataclasses.field(default_factory=dict)
+    joint_normals: dict = dataclasses.field(default_factory=dict)
     loops: tuple = dataclasses.field(metadata=dict(static=True), default=())
+    joint_bodies: tuple = dataclasses.field(metadata=dict(static=True), default=())
 
     def reaction(self, name):
         """The reaction named `name` (N, complex ``Fx + i Fy``, one per sample):
@@ -88,6 +108,54 @@ class InverseDynamics:
         known = list(self.joints) + [n for n, _ in self.loops]
         raise ValueError(f"no joint or loop named {name!r}; known: {known}")
 
+    def _joint(self, joint: str, what: str) -> JointBodies:
+        for entry in self.joint_bodies:
+            if entry.joint == joint:
+                return entry
+        if not self.joint_bodies:
+            raise ValueError(f"{what}: this result has no joint reactions (a Model without joints=; a Linkage has them)")
+        raise ValueError(f"{what}: no joint named {joint!r}; joints are {[j.joint for j in self.joint_bodies]}")
+
+    def force_on(self, link: str, joint: str):
+        """The force (N, complex ``Fx + i Fy``, global frame, one per sample) that the rest of
+        the mechanism exerts on `link` through `joint`: on a pin's link, the pin's force on
+        it; on a slider's block, the guide's normal force plus, where the slider is driven,
+        the drive's force along the guide (``tau``); on the guide, the opposite; on an
+        actuator's link, the actuator's push or pull.  `link` is one of the joint's two
+        bodies (``"ground"`` gives the force on the frame).
+
+        Newton's third law holds by construction, ``force_on(a, J) == -force_on(b, J)``, and
+        per link ``sum_J force_on(link, J) + gravity + loads = m a_G``.  Couples are not
+        forces: a driven pin's torque is in ``tau``, a slider's guide moment in
+        ``joint_moments``.  ``joints[J]`` is ``force_on(second body, J)`` less a driven
+        slider's drive force.
+
+        **Raises** ``ValueError`` for an unknown joint, or a link the joint does not join.
+        """
+        j = self._joint(joint, f"force_on({link!r}, {joint!r})")
+        if link not in (j.first, j.second):
+            raise ValueError(f"force_on({link!r}, {joint!r}): joint {joint!r} joins {j.first!r} and {j.second!r}; "
+                             "ask for the force on one of them")
+        force = self.joints[joint]
+        if j.drive >= 0:  # a driven slider: the drive pushes the block along the guide, e = -i n
+            force = force - 1j * self.joint_normals[joint] * self.tau[..., j.drive]
+        return force if link == j.second else -force
+
+    def normal_force(self, joint: str):
+        """A slider's or a slot's normal force (N, real, one per sample): the force of the
+        joint's first body (the guide, the slotted body) on its second (the block, the pin's
+        link) along the joint's normal ``joint_normals[joint]``: the guide's left normal
+        (``i e``, ``e`` the guide's direction), or a circular slot's radius from its centre
+        to the pin.  Positive pushes the block to the guide's left (out of a circular slot's
+        centre).  A driven slider's drive force along the guide is not in it (``tau``).
+
+        **Raises** ``ValueError`` for a joint that is not a slider or a slot."""
+        self._joint(joint, f"normal_force({joint!r})")
+        if joint not in self.joint_normals:
+            raise ValueError(f"normal_force({joint!r}): {joint!r} is not a slider or a slot; "
+                             f"they are {list(self.joint_normals)} (a pin's force is force_on(link, joint))")
+        return jnp.real(self.joints[joint] * jnp.conj(self.joint_normals[joint]))
+
 
 def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2):
     """Everything at one sample from its position and per-unit-input derivatives: the rates,
@@ -100,9 +168,12 @@ def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2
     tau, lam = balance(model, st)
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
     pts = point_kinematics(mech, names, p, qs, qd, qdd, u, ud, udd)
-    out = dict(tau=tau, reactions=lam, q_dot=nan(qd), q_ddot=nan(qdd), points=jax.tree_util.tree_map(nan, pts), joints={}, joint_moments={})
+    out = dict(tau=tau, reactions=lam, q_dot=nan(qd), q_ddot=nan(qdd), points=jax.tree_util.tree_map(nan, pts), joints={},
+               joint_moments={}, joint_normals={})
     if model.joints:
         _, out["joints"], out["joint_moments"] = joint_reactions(model, st)
+        out["joint_normals"] = {joint_name(j): nan(joint_axes(model, j, st.q, st.u, st.p)[1])
+                                for j in model.joints if isinstance(j, (Prismatic, Slot))}
     return out
 
 
@@ -124,8 +195,14 @@ def inverse_dynamics_batch(model, quasi_static, options, u, ud, udd, p, t, guess
     return jax.vmap(lambda *a: _at_one(model, quasi_static, names, options, *a))(u, ud, udd, p, t, guess)
 
 
-def _result(mech, t, u, ud, udd, fields) -> InverseDynamics:
-    return InverseDynamics(t=t, u=u, u_dot=ud, u_ddot=udd, loops=mech.equations, **fields)
+def _joint_bodies(model: Model) -> tuple[JointBodies, ...]:
+    inputs = model.mechanism.inputs
+    return tuple(JointBodies(joint_name(j), *j.bodies, inputs.index(j.input) if isinstance(j, Prismatic) and j.input else -1)
+                 for j in model.joints)
+
+
+def _result(model: Model, t, u, ud, udd, fields) -> InverseDynamics:
+    return InverseDynamics(t=t, u=u, u_dot=ud, u_ddot=udd, loops=model.mechanism.equations, joint_bodies=_joint_bodies(model), **fields)
 
 
 def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=0.0, quasi_static: bool = False,
@@ -156,7 +233,7 @@ def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=
     out = inverse_dynamics_batch(model, bool(quasi_static), options, *args, pf, flat(t, 0), flat(guess.astype(dtype), 1))
     out = jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), out)
     r = lambda x: x.reshape(shape + x.shape[1:])  # noqa: E731
-    return _result(mech, jnp.broadcast_to(t, shape), r(args[0]), r(args[1]), r(args[2]), out)
+    return _result(model, jnp.broadcast_to(t, shape), r(args[0]), r(args[1]), r(args[2]), out)
 
 
 def statics(model: Model, u, p: Mapping, guess, *, t=0.0, options: SolverOptions = SolverOptions()) -> InverseDynamics:
@@ -220,4 +297,4 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     if leaves is not None:
         leaves = [jnp.asarray(x, dtype) for x in leaves]
     u, ud, udd, out = _along(model, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype), sol.q, d1, d2)
-    return _result(mech, t, u, ud, udd, dict(out, q=sol.q, status=sol.status))
+    return _result(model, t, u, ud, udd, dict(out, q=sol.q, status=sol.status))

@@ -28,7 +28,7 @@ from .joints import GROUND, Actuator, Prismatic, Revolute, Slot, joint_name
 from .model import Axial, Model, Moment, PointForce, angle_of, point_of
 from .virtual_power import LoadedState
 
-__all__ = ["joint_reactions"]
+__all__ = ["joint_reactions", "joint_axes"]
 
 
 def _cross(r, f):
@@ -83,9 +83,11 @@ class _System:
             self.rhs[r] = self.rhs.get(r, 0.0) - v
 
 
-def _direction(model: Model, joint, q, u, p):
-    """Unit vectors of a joint at this pose: the guide's direction ``e`` (prismatic,
-    straight slot; ``None`` otherwise) and the normal ``n`` its force acts along."""
+def joint_axes(model: Model, joint, q, u, p):
+    """Unit vectors (complex, global) of a ``Prismatic`` or ``Slot`` joint at a pose: the
+    guide's direction ``e`` (a straight guide or slot at its angle; ``None`` for a circular
+    slot) and the normal ``n`` its normal force acts along (``i e``, the left normal of
+    ``e``; a circular slot's radius, from its centre to the pin)."""
     mech = model.mechanism
     at = point_of(mech, joint.point, q, u, p)
     if isinstance(joint, Slot) and joint.center is not None:
@@ -122,7 +124,7 @@ def _write_joints(sys_: _System, model: Model, st: LoadedState):
                 sys_.torque(a, drive, -1.0)
             geometry[name] = (None, None)
             continue
-        e, n = _direction(model, j, q, u, p)
+        e, n = joint_axes(model, j, q, u, p)
         sys_.force(b, cols[0], n, at)
         sys_.force(a, cols[0], -n, at)
         if isinstance(j, Prismatic):
