@@ -15,6 +15,7 @@ import numpy as np
 from ..dynamics.inverse import InverseDynamics, inverse_dynamics
 from ..dynamics.joints import joint_name
 from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
+from ..names import closest, did_you_mean, near_hint
 from ..continuation import solve_stroke
 from ..options import SolverOptions
 from ..units import to_si
@@ -85,8 +86,8 @@ class Linkage:
       a point name, a massless block at that point) slides along a straight guide fixed to
       the body `guide` (default ground) through its first point, at `angle` (rad, or
       ``"30deg"``, global in the drawing; or ``"through": point`` of the guide).
-    - `slots`: ``{pin: {"on": body, "center": point or (x, y)}}`` a pin in a circular slot
-      of `body` (default ground), or ``{"on": body, "angle": direction}`` a straight slot.
+    - `slots`: ``{pin: {"on": body, "center": point or (x, y)}}`` a pin in a circular slot of
+      `body` (default ground), or ``{"on": body, "angle": direction or "through": point}`` straight.
     - `actuators`: ``{name: (a, b)}``: a linear actuator (hydraulic cylinder, screw jack)
       pinned at points `a` and `b`; its length is an input (list it in `driver`).
     - `mass` ``{link: kg}``; `inertia` ``{link: kg m^2}`` about the centre of mass; `centre`
@@ -129,6 +130,8 @@ class Linkage:
         if not drivers:
             raise ValueError(f"{self.name}: say what is driven: driver= a crank link, a slider or an actuator")
         drivers = tuple(f"block_{d}" if d in self.points and f"block_{d}" in block_of else d for d in drivers)
+        for d in (d for d in drivers if d not in links and d not in acts):
+            raise ValueError(f"{self.name}: driver {d!r} is not a link, a slider or an actuator; {did_you_mean(d, [*links, *acts], 'links')}")
         self.mass_spec = self._masses(links, mass, inertia, centre)
         g_vec = None if gravity is None else (complex(0, -_number(gravity, "m/s^2", "gravity")) if np.ndim(gravity) == 0 else _point(gravity, "gravity", "m/s^2"))
         self.g = 0.0 if g_vec is None else abs(g_vec)
@@ -136,7 +139,7 @@ class Linkage:
         self.moment_values = {k: _number(v, "N m", f"moments[{k!r}]") for k, v in dict(moments or {}).items()}
         for k in self.moment_values:
             if k not in links:
-                raise ValueError(f"{self.name}: moments: {k!r} is not a link")
+                raise ValueError(f"{self.name}: moments: {k!r} is not a link; {did_you_mean(k, links, 'links')}")
         self.extra = {k: float(v) for k, v in dict(params or {}).items()}
         self.links = links
         self.ground = ground
@@ -166,7 +169,7 @@ class Linkage:
         for k, pts in [*links.items(), ("ground", ground)]:
             for x in pts:
                 if x not in self.points:
-                    raise ValueError(f"{self.name}: {k} names point {x!r}, which is not in points")
+                    raise ValueError(f"{self.name}: {k} names point {x!r}, which is not in points; {did_you_mean(x, self.points, 'points')}")
             if len(set(pts)) != len(pts):
                 raise ValueError(f"{self.name}: {k} lists a point twice: {pts}")
         if GROUND in links:
@@ -186,13 +189,12 @@ class Linkage:
                 block = f"block_{key}"
                 links[block] = [key]
             else:
-                raise ValueError(f"{self.name}: sliders: {key!r} is neither a link nor a point")
+                raise ValueError(f"{self.name}: sliders: {key!r} is neither a link nor a point; {did_you_mean(key, [*links, *self.points])}")
             guide = spec.get("on", GROUND)
             if guide != GROUND and guide not in links:
-                raise ValueError(f"{self.name}: sliders[{key!r}]: guide {guide!r} is not a link or 'ground'")
-            at = self.points[links[block][0]]
+                raise ValueError(f"{self.name}: sliders[{key!r}]: guide {guide!r} is not a link or 'ground'; {did_you_mean(guide, links, 'links')}")
             if "through" in spec:
-                self.slider_angles[block] = cmath.phase(self.points[spec["through"]] - at)
+                self.slider_angles[block] = self._towards(links[block][0], spec["through"], f"sliders[{key!r}]")
             elif "angle" in spec:
                 self.slider_angles[block] = _number(spec["angle"], "rad", f"sliders[{key!r}].angle")
             else:
@@ -209,28 +211,36 @@ class Linkage:
         for pin, spec in dict(slots or {}).items():
             spec = dict(spec)
             if pin not in self.points:
-                raise ValueError(f"{self.name}: slots: pin {pin!r} is not in points")
+                raise ValueError(f"{self.name}: slots: pin {pin!r} is not in points; {did_you_mean(pin, self.points, 'points')}")
             body = spec.get("on", GROUND)
             pts = ground if body == GROUND else links.get(body)
             if pts is None:
-                raise ValueError(f"{self.name}: slots[{pin!r}]: {body!r} is not a link or 'ground'")
+                raise ValueError(f"{self.name}: slots[{pin!r}]: {body!r} is not a link or 'ground'; {did_you_mean(body, links, 'links')}")
             if "center" in spec or "centre" in spec:
                 c = spec.get("center", spec.get("centre"))
                 if isinstance(c, str):
                     if c not in pts:
-                        raise ValueError(f"{self.name}: slots[{pin!r}]: centre {c!r} is not a point of {body!r}")
+                        raise ValueError(f"{self.name}: slots[{pin!r}]: centre {c!r} is not a point of {body!r}; {did_you_mean(c, pts, 'its points')}")
                     slot_centre = c
                 else:
                     slot_centre = f"centre_{pin}"
                     self.points[slot_centre] = _point(c, f"slots[{pin!r}].center")
                     pts.append(slot_centre)
                 slot_specs.append((pin, body, slot_centre))
-            elif "angle" in spec:
-                self.slot_angles[pin] = _number(spec["angle"], "rad", f"slots[{pin!r}].angle")
+            elif "through" in spec or "angle" in spec:
+                self.slot_angles[pin] = (self._towards(pin, spec["through"], f"slots[{pin!r}]") if "through" in spec
+                                         else _number(spec["angle"], "rad", f"slots[{pin!r}].angle"))
                 slot_specs.append((pin, body, ""))
             else:
-                raise ValueError(f"{self.name}: slots[{pin!r}] needs center= (a circular slot) or angle= (a straight one)")
+                raise ValueError(f"{self.name}: slots[{pin!r}] needs center= (a circular slot), or angle= or through= (a straight one)")
         return slot_specs
+
+    def _towards(self, start: str, through, what: str) -> float:
+        """A straight guide's or slot's angle (rad, global) from `start` towards point `through`."""
+        if through not in self.points or self.points[through] == self.points[start]:
+            why = f"is where {start!r} is" if through in self.points else f"is not in points; {did_you_mean(str(through), self.points)}"
+            raise ValueError(f"{self.name}: {what}: through= {through!r} {why}")
+        return cmath.phase(self.points[through] - self.points[start])
 
     def _read_actuators(self, actuators) -> dict:
         """``{actuator: (point, point)}``: each joins two points of the drawing."""
@@ -238,7 +248,7 @@ class Linkage:
         for k, v in dict(actuators or {}).items():
             pts = _names(v, f"actuators[{k!r}]")
             if len(pts) != 2 or any(x not in self.points for x in pts):
-                raise ValueError(f"{self.name}: actuators[{k!r}] joins two points of the drawing, got {v!r}")
+                raise ValueError(f"{self.name}: actuators[{k!r}] joins two points of the drawing, got {v!r}{near_hint(pts, self.points)}")
             acts[k] = pts
         return acts
 
@@ -250,8 +260,9 @@ class Linkage:
             spec = spec if isinstance(spec, Mapping) else {"force": spec}
             owners = [k for k, pts in links.items() if x in pts]
             on = spec.get("on", owners[0] if len(owners) == 1 else None)
-            if on not in links:
-                raise ValueError(f"{self.name}: forces[{x!r}]: say which link it acts on (on=); the point is on {owners}")
+            if on not in links:  # (a point of no link, or misspelt)
+                near = near_hint([x], self.points) or near_hint([on], links)
+                raise ValueError(f"{self.name}: forces[{x!r}]: say which link it acts on (on=); the point is on {owners}{near}")
             force_specs.append((x, on))
             self.force_values[x] = _point(spec["force"], f"forces[{x!r}]", "N")
         return force_specs
@@ -262,7 +273,7 @@ class Linkage:
         for what, d in (("mass", mass), ("inertia", inertia), ("centre", centre)):
             for k in d:
                 if k not in links:
-                    raise ValueError(f"{self.name}: {what}: {k!r} is not a link; links are {list(links)}")
+                    raise ValueError(f"{self.name}: {what}: {k!r} is not a link; {did_you_mean(k, links, 'links')}")
         out = {}
         for k in links:
             m = _number(mass.get(k, 0.0), "kg", f"mass[{k!r}]")
@@ -382,7 +393,8 @@ class Linkage:
             derived = any(k.startswith("J_") or "_G_" in k for k in unknown)
             hint = ("; a link's centre of mass and inertia follow its joints unless given: pass centre= or inertia= to "
                     "Linkage for values of your own" if derived else "")
-            raise ValueError(f"{self.name}: unknown parameter(s) {unknown}; see Linkage.params{hint}")
+            see = f"did you mean {closest(unknown[0], self._values)!r}?" if closest(unknown[0], self._values) else "see Linkage.params"
+            raise ValueError(f"{self.name}: unknown parameter(s) {unknown}; {see}{hint}")
         return {**self._values, **{k: p[k] for k in p}}
 
     def _approach(self, samples: Samples):
