@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -110,25 +112,52 @@ def points(text):
 
 
 def check_writable_dir(path: Path, what: str) -> None:
-    """``UsageError`` (one line) unless ``path`` is, or can be made, a writable folder:
-    checked before anything is computed."""
+    """``UsageError`` (one line) unless ``path`` is a folder that can be written, or one that
+    can be made in a folder that exists: checked by writing (and removing) a file there before
+    anything is computed.  The rule: the command makes the folder named, never the folders
+    above it (a missing one is more often a typo than a wish)."""
     if path.exists() and not path.is_dir():
         raise UsageError(f"{what} {str(path)!r} is a file, not a folder; give a folder name")
-    parent = path
-    while not parent.exists():  # the nearest existing ancestor must be a writable folder
-        parent = parent.parent
-    if not parent.is_dir():
-        raise UsageError(f"{what} {str(path)!r} cannot be created: {str(parent)!r} is a file, not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UsageError(f"{what} {str(path)!r} cannot be written: no write permission in {str(parent)!r}")
+    _in_a_folder(path, path.parent, what)
+    _writable(path, path, what)
 
 
 def check_writable_file(path: Path, what: str) -> None:
-    """``UsageError`` (one line) unless a file can be written at ``path`` (not a folder;
-    its folder exists or can be made and is writable); checked before computing."""
+    """``UsageError`` (one line) unless a file can be written at ``path``: not a folder, in a
+    folder that exists (none is made for a file) and can be written; checked before computing."""
     if path.is_dir():
         raise UsageError(f"{what} {str(path)!r} is a folder; give a file name")
-    check_writable_dir(path.parent if str(path.parent) else Path("."), f"{what}'s folder for")
+    folder = path.parent if str(path.parent) else Path(".")
+    _in_a_folder(path, folder, what)
+    _writable(path, folder, what)
+
+
+def _in_a_folder(path: Path, folder: Path, what: str) -> None:
+    """``UsageError`` unless `folder`, where `path` goes, is a folder that exists."""
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(f"{what} {str(path)!r} cannot be written: {str(folder)!r} is a file, not a folder")
+    if not folder.is_dir():
+        raise UsageError(f"{what} {str(path)!r}: the folder {str(folder)!r} does not exist; create it first")
+
+
+def _writable(path: Path, folder: Path, what: str) -> None:
+    """``UsageError`` unless a file can be made in `folder` (made, and removed, when missing)
+    and `path`, if it is a file already, may be written: the file system is asked, since a
+    permission bit does not tell (root passes ``os.access`` in ``/proc``, ``/sys`` and on a
+    read-only disk's folders)."""
+    made = not folder.exists()
+    try:
+        if path.is_file() and not os.access(path, os.W_OK):
+            raise PermissionError(13, "no write permission")
+        if made:
+            folder.mkdir()
+        with tempfile.TemporaryFile(dir=folder, prefix=".jaxmech-probe-"):
+            pass
+    except OSError as e:
+        raise UsageError(f"{what} {str(path)!r} cannot be written: {e.strerror or e}") from None
+    finally:
+        if made and folder.exists():
+            folder.rmdir()
 
 
 def parse_ranges(items) -> dict[str, tuple[float, float]]:
@@ -152,9 +181,9 @@ def parse_ranges(items) -> dict[str, tuple[float, float]]:
 
 
 def figure_functions(items) -> dict:
-    """``["peak[N m]=mymod:peak"]`` -> ``{"peak[N m]": mymod.peak}``; ``UsageError`` if it cannot be imported."""
-    import importlib
-
+    """``["peak[N m]=mymod:peak"]`` -> ``{"peak[N m]": mymod.peak}``, the module imported from
+    the current folder too (as ``python`` would; the installed command's own path does not
+    hold it); ``UsageError`` if it cannot be imported."""
     out = {}
     for item in items or ():
         name, sep, ref = item.partition("=")
@@ -162,10 +191,26 @@ def figure_functions(items) -> dict:
         if not sep or not name.strip() or not colon or not mod or not fn:
             raise UsageError(f"--figure expects NAME=MODULE:FUNCTION, got {item!r}")
         try:
-            obj = getattr(importlib.import_module(mod), fn)
+            obj = getattr(_import_here(mod), fn)
         except Exception as e:  # noqa: BLE001 - the user's module: any failure is one line
-            raise UsageError(f"--figure {name}: cannot import {ref!r} ({type(e).__name__}: {e})") from None
+            raise UsageError(f"--figure {name}: cannot import {ref!r} ({type(e).__name__}: {' '.join(str(e).split())})") from None
         if not callable(obj):
             raise UsageError(f"--figure {name}: {ref!r} is not a function")
         out[name.strip()] = obj
     return out
+
+
+def _import_here(module: str):
+    """``importlib.import_module(module)`` with the current folder on the import path for
+    the import (and only for it)."""
+    import importlib
+
+    here = os.getcwd()
+    added = here not in sys.path and "" not in sys.path
+    if added:
+        sys.path.insert(0, here)
+    try:
+        return importlib.import_module(module)
+    finally:
+        if added:
+            sys.path.remove(here)

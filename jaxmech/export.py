@@ -339,16 +339,24 @@ def _meta(pose: Pose, units: str) -> dict:
             "jaxmech_input_unit": pose.scene.units.get(pose.input_name, ""), "jaxmech_units": units}
 
 
-def _write(sheet: Sheet, pose: Pose, path, units: str, what: str) -> Path:
+def _checked_path(path) -> Path:
+    """`path` as a ``Path``; ``ValueError`` unless it ends in ``.dxf`` or ``.svg`` and its
+    folder exists (no folder is made: a missing one is more often a typo than a wish)."""
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
+    if path.suffix.lower() not in SUFFIXES:
         raise ValueError(f"export path must end in {' or '.join(SUFFIXES)}, got {str(path)!r}")
+    folder = path.parent
+    if not folder.is_dir():
+        raise ValueError(f"export path {str(path)!r}: the folder {str(folder)!r} does not exist; create it first")
+    return path
+
+
+def _write(sheet: Sheet, pose: Pose, path, units: str, what: str) -> Path:
+    path = _checked_path(path)
     if units not in UNIT_SCALE:
         raise ValueError(f"units must be one of {list(UNIT_SCALE)}, got {units!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
     meta = _meta(pose, units)
-    if suffix == ".dxf":
+    if path.suffix.lower() == ".dxf":
         write_dxf(sheet, path, units, meta)
     else:
         write_svg(sheet, path, units, meta, f"{what}: {pose.describe()}")
@@ -380,11 +388,11 @@ def export_pose(obj, at, path, *, params: Mapping | None = None, units: str = "m
     - `joint_radius`: radius of the joint circles (m; default 2 % of the drawing's size).
     - `labels`: write the point names.
 
-    **Returns** the path.  **Raises** ``ValueError`` (one line) for a bad suffix or value, or
-    a pose the mechanism cannot reach (``solve_pose``).
+    **Returns** the path.  **Raises** ``ValueError`` (one line) for a bad suffix or value, a
+    folder that does not exist (none is made), or a pose the mechanism cannot reach
+    (``solve_pose``).
     """
-    if Path(path).suffix.lower() not in SUFFIXES:
-        raise ValueError(f"export path must end in {' or '.join(SUFFIXES)}, got {str(path)!r}")
+    _checked_path(path)
     pose = solve_pose(obj, at, params=params)
     return write_pose(pose, path, units=units, joint_radius=joint_radius, labels=labels)
 
@@ -415,12 +423,12 @@ def export_stroke(obj, path, *, at=None, params: Mapping | None = None, points: 
     - `params`, `units`, `joint_radius`, `labels`: as ``export_pose``.
 
     **Returns** the path.  **Raises** ``ValueError`` (one line) for a bad suffix or value, a
-    stroke that cannot be assembled (``run_scene``) or a pose that cannot be reached.
+    folder that does not exist (none is made), a stroke that cannot be assembled
+    (``run_scene``) or a pose that cannot be reached.
     """
     from .scenes import run_scene
 
-    if Path(path).suffix.lower() not in SUFFIXES:
-        raise ValueError(f"export path must end in {' or '.join(SUFFIXES)}, got {str(path)!r}")
+    _checked_path(path)
     if int(swept) < 0:
         raise ValueError(f"swept must be a number of poses >= 0, got {swept}")
     scene, p, names, result = _resolve(obj, params)

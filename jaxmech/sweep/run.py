@@ -233,7 +233,8 @@ class Streamed(NamedTuple):
 
 def stream_chunks(chunks, writer: DatasetWriter, counts: dict, bar) -> Streamed:
     """Every finished chunk handed to `writer` (its statuses added to `counts`, in place);
-    a failed one kept aside in ``lost``."""
+    a failed one kept aside in ``lost``.  The bar counts every chunk but the last, whose
+    designs are counted once the files are written (``write_chunks``): it ends with the work."""
     rows = written = 0
     lost: dict[int, BaseException] = {}
     names_out = None
@@ -246,7 +247,8 @@ def stream_chunks(chunks, writer: DatasetWriter, counts: dict, bar) -> Streamed:
             rows, written = rows + rep.rows, written + 1
             for k, v in rep.counts.items():
                 counts[k] = counts.get(k, 0) + v
-        bar.update(e - s)
+        if bar.n + (e - s) < bar.total:  # the last chunk waits for the files (write_chunks)
+            bar.update(e - s)
     return Streamed(rows, written, lost, names_out)
 
 
@@ -279,12 +281,13 @@ def write_chunks(chunks, writer: DatasetWriter, state, job: Job, params, counts:
     try:
         with bar:
             rows, written, lost, names_out = stream_chunks(chunks, writer, counts, bar)
-        if lost:
-            if names_out is None and not state.done:
-                first = next(iter(lost.values()))
-                raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
-            rows, lost_msgs = write_lost(writer, lost, names_out, state, job, params, counts, rows)
-        writer.close()
+            if lost:
+                if names_out is None and not state.done:
+                    first = next(iter(lost.values()))
+                    raise RuntimeError(f"sweep_dataset: every chunk failed; first error: {type(first).__name__}: {first}") from first
+                rows, lost_msgs = write_lost(writer, lost, names_out, state, job, params, counts, rows)
+            writer.close()
+            bar.update(bar.total - bar.n)  # the last chunk's designs: written
     except BaseException:
         writer.abort()  # the chunks in memory are kept: a rerun skips them
         raise
