@@ -20,6 +20,9 @@ tolerance and costs about one extra stroke evaluation whatever the number of par
   program; a ``StrokeProblem`` (rows of the motion at each stroke sample) gets its
   Lagrangian's Hessian by a second-order adjoint (``stroke_problem``), a program several
   times smaller than nested automatic differentiation through the solver.
+- ``refine``: the best designs of a sweep (``best_designs``) refined in one
+  ``minimize_second_order`` call under a statement over a scene's table columns
+  (``scene_problem``: least peak of a column, limits at every sample).
 - ``tolerance`` (``analyse``, ``monte_carlo``): the spread of figures from manufacturing
   tolerances, first order (forward-mode Jacobians, ``batch_jacobian``) and by sampling.
 - ``synthesize_path`` finds a four-bar whose coupler curve passes through (or nearest to)
@@ -39,6 +42,9 @@ from .fitting import StopReason as StopReason
 from .fitting import fit as fit
 from .sensitivities import Sensitivities as Sensitivities
 from .sensitivities import sensitivities as sensitivities
+from .refine import best_designs as best_designs
+from .refine import refine as refine
+from .refine import scene_problem as scene_problem
 from .second_order import SecondOrderResult as SecondOrderResult
 from .second_order import minimize_second_order as minimize_second_order
 from .sqp import SQPOptions as SQPOptions
@@ -63,6 +69,9 @@ __all__ = [
     "SecondOrderResult",
     "StrokeProblem",
     "minimize_second_order",
+    "best_designs",
+    "refine",
+    "scene_problem",
     "PathError",
     "PathSynthesis",
     "coupler_curve",

@@ -120,6 +120,8 @@ class SecondOrderResult:
     - `wall_s`: the call's wall time (its compile included when this process compiled the
       program: the first call for a problem and a number of starts, unless a stored
       executable was loaded).
+    - `origin`: ``(S,)`` where each start came from (``refine``: its row of the sweep), or
+      None.
     """
 
     params: dict
@@ -133,6 +135,7 @@ class SecondOrderResult:
     optima: list
     feas_tol: float
     wall_s: float
+    origin: np.ndarray | None = None
 
     @property
     def converged(self) -> int:

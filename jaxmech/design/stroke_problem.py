@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..continuation import walk
 from ..implicit import input_derivatives
 from ..kinematics import Motion, chain_rule
 from ..linalg import inv_small, where
@@ -71,6 +72,14 @@ class StrokeProblem:
       ``(N, ...)``; ``points`` empty).  Any field of ``Stated`` may be empty; ``ok`` is
       overwritten by the solves' convergence.
     - `options`: the position solves' ``SolverOptions``.
+    - `t`: ``(N,)`` the samples' times in s (what time-dependent loads of `rows` read;
+      default zeros).
+    - `continuation`: False (default): each sample is solved on its own from `guess`;
+      True: `guess` is called at the first sample only and the stroke is followed from
+      there by continuation (the straight-line walk of ``solve_stroke``, on the requested
+      branch), for strokes too long for one guess per sample (a crank's whole turn).  A
+      trial design whose walk leaves a sample unsolved (a gap) does not assemble: the
+      optimiser shortens its step (the gap handling of sweeps is not needed here).
 
     Compared by identity: one object, one compiled program.
     """
@@ -84,6 +93,8 @@ class StrokeProblem:
     guess: Callable
     rows: Callable
     options: SolverOptions = SolverOptions()
+    t: np.ndarray | None = None
+    continuation: bool = False
 
     def __post_init__(self):
         dof = self.mechanism.dof
@@ -99,6 +110,11 @@ class StrokeProblem:
             raise ValueError(f"StrokeProblem: us, u_dot and u_ddot must have the same number of samples, got "
                              f"{self.us.shape[0]}, {self.u_dot.shape[0]}, {self.u_ddot.shape[0]}")
         object.__setattr__(self, "names", tuple(self.names))
+        t = np.zeros(n) if self.t is None else np.asarray(self.t, float)
+        if t.shape != (n,):
+            raise ValueError(f"StrokeProblem: t must have shape ({n},) (one time per sample), got {np.shape(self.t)}")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "continuation", bool(self.continuation))
 
     @functools.cached_property
     def program_key(self) -> str | None:
@@ -110,8 +126,8 @@ class StrokeProblem:
         if mech_key is None:
             return None
         dtype = jnp.zeros(()).dtype
-        digest = hashlib.sha256(repr((mech_key, self.names, repr(self.options), str(dtype))).encode())
-        for a in (self.us, self.u_dot, self.u_ddot):
+        digest = hashlib.sha256(repr((mech_key, self.names, repr(self.options), str(dtype), self.continuation)).encode())
+        for a in (self.us, self.u_dot, self.u_ddot, self.t):
             digest.update(repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
         x = {k: jax.ShapeDtypeStruct((), dtype) for k in self.names}
         try:
@@ -163,20 +179,44 @@ def _closure(mech: Mechanism, y: _Motion, u, p):
     return _Motion(mech.residual(y.q, u, p), _first(mech, y.q, y.d1, u, p), _second(mech, y.q, y.d1, y.d2, u, p))
 
 
-def _solve_sample(problem: StrokeProblem, p, u):
-    """Values only: the sample's root and its input derivatives, ``Phi_q^-1`` and ``ok``."""
+def _positions(problem: StrokeProblem, p, us):
+    """Values only: every sample's root ``q (N, m)`` and ``ok (N,)``, each sample from its
+    own guess, or (``continuation``) by the walk from the first sample's."""
     mech = problem.mechanism
     stop = jax.lax.stop_gradient
-    p, u = jax.tree_util.tree_map(stop, (p, u))
-    g = problem.guess(p, u)
-    finite = jnp.all(jnp.isfinite(g))
-    res = newton(mech, problem.options, u, p, where(finite, g, jnp.zeros_like(g)))
-    ok = finite & (res.status == Status.CONVERGED)
-    q = where(ok, res.q, jnp.zeros_like(res.q))
+    p, us = jax.tree_util.tree_map(stop, (p, us))
+    if problem.continuation:
+        g = problem.guess(p, us[0])
+        walked = walk(mech, problem.options, False, us, {k: jnp.reshape(v, (1,)) for k, v in p.items()}, g[None], us.shape[0],
+                      robust=False)
+        return walked.points.q[0], walked.converged[0] & jnp.all(jnp.isfinite(g))
+
+    def one(u):
+        g = problem.guess(p, u)
+        finite = jnp.all(jnp.isfinite(g))
+        res = newton(mech, problem.options, u, p, where(finite, g, jnp.zeros_like(g)))
+        return res.q, finite & (res.status == Status.CONVERGED)
+
+    return jax.vmap(one)(us)
+
+
+def _sample_motion(problem: StrokeProblem, p, u, q, ok):
+    """Values only: one sample's motion from its root (placeholders where not ``ok``):
+    ``(_Motion, Phi_q^-1)``."""
+    mech = problem.mechanism
+    p, u, q = jax.tree_util.tree_map(jax.lax.stop_gradient, (p, u, q))
+    q = where(ok, q, jnp.zeros_like(q))
     d1, d2 = input_derivatives(mech, q, u, p, ok)
     jq = jax.jacfwd(mech.residual)(q, u, p)
     jinv = inv_small(where(ok, jq, jnp.eye(mech.m, dtype=jq.dtype)), blocks(mech))
-    return _Motion(q, d1, d2), jinv, ok
+    return _Motion(q, d1, d2), jinv
+
+
+def _solve_stroke(problem: StrokeProblem, p, us):
+    """Every sample's ``(_Motion, Phi_q^-1, ok)``, ``(N, ...)`` in front."""
+    q, ok = _positions(problem, p, us)
+    y, jinv = jax.vmap(lambda u_, q_, ok_: _sample_motion(problem, p, u_, q_, ok_))(us, q, ok)
+    return y, jinv, ok
 
 
 def _apply(a, r):
@@ -214,7 +254,7 @@ def _motion(problem: StrokeProblem, y: _Motion, dtype) -> Motion:
     us, ud, udd = (jnp.asarray(a, dtype) for a in (problem.us, problem.u_dot, problem.u_ddot))
     qd, qdd = jax.vmap(chain_rule)(y.d1, y.d2, ud, udd)
     n = us.shape[0]
-    return Motion(t=jnp.zeros((n,), dtype), u=us, u_dot=ud, u_ddot=udd, q=y.q, q_dot=qd, q_ddot=qdd, dq_du=y.d1, d2q_du2=y.d2,
+    return Motion(t=jnp.asarray(problem.t, dtype), u=us, u_dot=ud, u_ddot=udd, q=y.q, q_dot=qd, q_ddot=qdd, dq_du=y.d1, d2q_du2=y.d2,
                   points={}, status=jnp.zeros((n,), jnp.int32), coords=problem.mechanism.coords, inputs=problem.mechanism.inputs)
 
 
@@ -252,7 +292,7 @@ def stroke_evaluator(problem: StrokeProblem):
         us = jnp.asarray(problem.us, dtype)
         params = lambda x_: problem.params(dict(zip(problem.names, x_)))  # noqa: E731
         p = params(x)
-        y, jinv, ok_i = jax.vmap(lambda u_: _solve_sample(problem, p, u_))(us)
+        y, jinv, ok_i = _solve_stroke(problem, p, us)
         # design tangents: dp for each direction, then Y_x sample by sample
         eye = jnp.eye(n, dtype=dtype)
         dps = jax.vmap(lambda e: jax.jvp(params, (x,), (e,))[1])(eye)
@@ -291,7 +331,7 @@ def stroke_state(problem: StrokeProblem) -> Callable:
         x = jnp.stack([jnp.asarray(xd[k]) for k in problem.names])
         p = problem.params(dict(zip(problem.names, x)))
         us = jnp.asarray(problem.us, x.dtype)
-        y0, _, ok_i = jax.vmap(lambda u_: _solve_sample(problem, p, u_))(us)
+        y0, _, ok_i = _solve_stroke(problem, p, us)
 
         def attach(q, ok, u):
             q = implicit_positions(mech, q, ok, u, p)

@@ -37,7 +37,7 @@ from ..mechanism import Vars
 from ..implicit import implicit_positions
 from .model import Axial, Gravity, Model, Moment, PointForce, Potential, geometry, masses
 
-__all__ = ["generalized_forces", "LoadedState", "loaded_state", "balance", "mass_matrix", "kinetic_energy", "potential_energy"]
+__all__ = ["generalized_forces", "LoadedState", "loaded_state", "balance", "driving_effort", "mass_matrix", "kinetic_energy", "potential_energy"]
 
 
 def _dot(a, b):
@@ -145,9 +145,9 @@ def loaded_state(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool =
                        forces=forces, moments=moments, tensions=tensions, gravity=grav, masses=m_, inertias=J_)
 
 
-def balance(model: Model, st: LoadedState):
-    """Driving generalized forces and constraint multipliers ``(tau (dof,), lam (m,))`` from
-    a ``LoadedState`` (see ``generalized_forces``)."""
+def _work_gradient(model: Model, st: LoadedState):
+    """``I - Q`` over ``x = (q, u)`` at a ``LoadedState``: the gradient of the virtual-work
+    function ``W(x)`` with the accelerations and loads frozen (module docstring)."""
     mech = model.mechanism
     q, u, p, t = st.q, st.u, st.p, st.t
     dtype = q.dtype
@@ -158,7 +158,6 @@ def balance(model: Model, st: LoadedState):
     potentials = [ld for ld in model.loads if isinstance(ld, Potential)]
 
     def work(x):
-        # W(x): grad W = I - Q at the frozen accelerations and loads (virtual power).
         qx, ux = x[: mech.m], x[mech.m :]
         rg, ph, lp, la, ll = geometry(model, qx, ux, p)
         w = jnp.zeros((), dtype)
@@ -177,13 +176,35 @@ def balance(model: Model, st: LoadedState):
             w = w + ld.energy(mech.vars_q(qx), mech.vars_u(ux), pv, t)
         return w
 
-    g = jax.grad(work)(jnp.concatenate([q, u]))
+    return jax.grad(work)(jnp.concatenate([q, u]))
+
+
+def balance(model: Model, st: LoadedState):
+    """Driving generalized forces and constraint multipliers ``(tau (dof,), lam (m,))`` from
+    a ``LoadedState`` (see ``generalized_forces``)."""
+    mech = model.mechanism
+    q, u, p = st.q, st.u, st.p
+    g = _work_gradient(model, st)
     jq, ju = jax.jacfwd(mech.residual, (0, 1))(q, u, p)
-    jq = jnp.where(st.ok, jq, jnp.eye(mech.m, dtype=dtype))
+    jq = jnp.where(st.ok, jq, jnp.eye(mech.m, dtype=q.dtype))
     lam = -solve_small(jq.T, g[: mech.m])
     tau = g[mech.m :] + ju.T @ lam
     nan = lambda x: jnp.where(st.ok, x, jnp.nan)  # noqa: E731
     return nan(tau), nan(lam)
+
+
+def driving_effort(model: Model, st: LoadedState, dq_du):
+    """The drive's generalized force ``tau (dof,)`` (N or N m, *on* each input, as
+    ``generalized_forces``) from a ``LoadedState`` and the input derivatives ``dq_du (m,
+    dof)`` at the same state: the virtual power along the motion's own tangent,
+    ``tau = (I - Q)_u + dq_du' (I - Q)_q``.  Equal to ``balance``'s ``tau`` (since
+    ``dq_du = -Phi_q^-1 Phi_u``) without its multipliers or linear solve: the lean path when
+    only the effort is asked for (a design problem's second derivatives through it are
+    several times cheaper to compile than through the joints' reactions)."""
+    g = _work_gradient(model, st)
+    m = model.mechanism.m
+    tau = g[m:] + jnp.asarray(dq_du).T @ g[:m]
+    return jnp.where(st.ok, tau, jnp.nan)
 
 
 def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool = True, q_dot=None, q_ddot=None):

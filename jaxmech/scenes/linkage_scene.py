@@ -15,7 +15,7 @@ import numpy as np
 
 from ..dynamics.joints import Prismatic, joint_name
 from ..dynamics.reactions import joint_reactions
-from ..dynamics.virtual_power import loaded_state
+from ..dynamics.virtual_power import driving_effort, loaded_state
 from ..linkage.files import read_linkage_file
 from ..linkage.spec import Linkage
 from ..units import to_si
@@ -63,10 +63,16 @@ def _outputs(lk: Linkage) -> Outputs:
     model = lk.model
     mech = model.mechanism
 
+    def efforts(p, mo):
+        # by virtual power along the motion's tangent: no multipliers, no linear solve
+        def one(q, u, ud, udd, qd, qdd, t, d1):
+            return driving_effort(model, loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd), d1)
+
+        return jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t, mo.dq_du)
+
     def outputs(p, mo):
         def one(q, u, ud, udd, qd, qdd, t):
-            st = loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd)
-            return joint_reactions(model, st)
+            return joint_reactions(model, loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd))
 
         eff, forces, moments = jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t)
         out = {f"effort_{_column(name)}": eff[:, k] for k, name in enumerate(mech.inputs)}
@@ -79,7 +85,8 @@ def _outputs(lk: Linkage) -> Outputs:
                 out[f"M_{col}"] = moments[name]
         return out
 
-    return Outputs(outputs, _output_units(lk))
+    parts = {f"effort_{_column(name)}": (lambda p, mo, k=k: efforts(p, mo)[:, k]) for k, name in enumerate(mech.inputs)}
+    return Outputs(outputs, _output_units(lk), parts)
 
 
 def _drawing(lk: Linkage):

@@ -36,6 +36,9 @@ class Outputs:
       of the scene, SI; ``motion`` its ``Motion`` over the stroke), in ``jax.numpy`` to run
       inside the compiled programs.
     - `units`: ``{name: unit}`` for every name `fn` returns, in column order.
+    - `parts`: optional ``{name: fn(p, motion) -> values (N,)}``: a lighter function for one
+      output alone, equal to `fn`'s (e.g. a drive's effort by virtual power, without every
+      joint's reaction), used where only some outputs are read (``design.scene_problem``).
 
     Calling it returns ``{name: (values, unit)}`` in the order of `units`; ``ValueError``
     names an output `fn` returns without declaring it, or a declared one it does not return.
@@ -43,6 +46,7 @@ class Outputs:
 
     fn: Callable
     units: Mapping[str, str]
+    parts: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         if not callable(self.fn):
@@ -51,6 +55,14 @@ class Outputs:
         if bad or not self.units:
             raise ValueError(f"Outputs: units must map each output name to its unit string, got {self.units!r}")
         object.__setattr__(self, "units", dict(self.units))
+        unknown = [k for k in self.parts if k not in self.units]
+        if unknown:
+            raise ValueError(f"Outputs: parts {unknown} are not declared in units {list(self.units)}")
+        object.__setattr__(self, "parts", dict(self.parts))
+
+    def one(self, name: str, p, motion):
+        """Output `name` alone: its part's function where one is given, else `fn`'s value."""
+        return self.parts[name](p, motion) if name in self.parts else self.fn(p, motion)[name]
 
     def __call__(self, p, motion) -> dict:
         values = self.fn(p, motion)
