@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import cmath
 import dataclasses
-import math
 from collections.abc import Mapping, Sequence
 
 import jax
@@ -14,58 +13,25 @@ import numpy as np
 
 from ..dynamics.inverse import InverseDynamics, inverse_dynamics
 from ..dynamics.joints import joint_name
+from ..dynamics.power import PowerBalance, power_balance
 from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..names import closest, did_you_mean, near_hint
 from ..continuation import solve_stroke
 from ..options import SolverOptions
-from ..units import to_si
+from .elements import DISSIPATING, STORING, drawing_values, load_name, read_elements
 from .mass import derived_shapes, link_mass_properties
 from .terms import show
 from .topology import GROUND, Built, Topology, build, link_joints
+from .values import read_names as _names
+from .values import read_number as _number
+from .values import read_point as _point
+from .values import wrap_angle as _wrap
 
 __all__ = ["Linkage"]
 
 #: Points on the way from the drawing's input to a stroke's first input (the stroke starts
 #: on the drawing's assembly mode: it is reached by continuation, not by a jump).
 APPROACH = 24
-
-
-def _names(value, what: str) -> tuple[str, ...]:
-    if isinstance(value, str):
-        value = value.replace(",", " ").split()
-    try:
-        names = tuple(value)
-    except TypeError:
-        raise ValueError(f"{what}: give point names as a list or a string 'A B C', got {value!r}") from None
-    for n in names:
-        if not isinstance(n, str) or not n.isidentifier():
-            raise ValueError(f"{what}: {n!r} is not a valid name (use Python identifiers: letters, digits, _)")
-    return names
-
-
-def _number(v, unit: str, what: str) -> float:
-    try:
-        x = to_si(v, unit) if isinstance(v, str) else float(v)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{what}: {v!r} is not a number in {unit} ({err})") from None
-    if not math.isfinite(x):
-        raise ValueError(f"{what}: must be finite, got {v!r}")
-    return x
-
-
-def _point(v, what: str, unit: str = "m") -> complex:
-    """``(x, y)`` (numbers in `unit`, or strings with a unit) as a complex number."""
-    if isinstance(v, complex):
-        return v
-    try:
-        x, y = v
-    except (TypeError, ValueError):
-        raise ValueError(f"{what}: give (x, y) in {unit}, got {v!r}") from None
-    return complex(_number(x, unit, what), _number(y, unit, what))
-
-
-def _wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 class Linkage:
@@ -102,6 +68,13 @@ class Linkage:
     - `gravity`: ``g`` in m/s^2 pointing down (-y), or a vector ``(gx, gy)``; None: none.
     - `forces`: ``{point: (Fx, Fy)}`` constant forces (N), or ``{point: {"force": (Fx, Fy),
       "on": link}}`` where the point joins several links; `moments`: ``{link: M}`` (N m, CCW).
+    - `springs` ``{name: {"between": (a, b), "k": N/m, "free_length": m, "preload": N}}``,
+      `torsion_springs` ``{name: {"at": pin or "links": (a, b), "k": N m/rad, "free_angle":
+      rad}}``, `gas_springs` ``{name: {"between": (a, b), "force": N, "gas_length": m,
+      "length": m, "n": -}}``, `dampers` ``{name: {"between": (a, b), "c": N s/m}}``,
+      `rotary_dampers` ``{name: {"at": pin or "links": (a, b), "c": N m s/rad}}``: springs
+      and dampers, loads with parameters of their own (``k_<name>``...: see
+      ``jaxmech.linkage.elements`` and ``docs/springs_and_dampers.md``).
     - `loads`, `params`: loads of your own (``PointForce``, ``Moment``, ``Axial`` with
       ``body=``) and the values of the parameters they use.
     - `name`: for messages and files.
@@ -115,8 +88,9 @@ class Linkage:
     def __init__(self, points: Mapping, links: Mapping, ground=(), *, driver=(), sliders: Mapping | None = None,
                  slots: Mapping | None = None, actuators: Mapping | None = None, mass: Mapping | None = None,
                  inertia: Mapping | None = None, centre: Mapping | None = None, gravity=None,
-                 forces: Mapping | None = None, moments: Mapping | None = None, loads: Sequence = (),
-                 params: Mapping | None = None, name: str = "linkage"):
+                 forces: Mapping | None = None, moments: Mapping | None = None, springs: Mapping | None = None,
+                 torsion_springs: Mapping | None = None, gas_springs: Mapping | None = None, dampers: Mapping | None = None,
+                 rotary_dampers: Mapping | None = None, loads: Sequence = (), params: Mapping | None = None, name: str = "linkage"):
         self.name = str(name)
         if not isinstance(points, Mapping) or not points:
             raise ValueError(f"{self.name}: points must be a mapping {{name: (x, y)}}")
@@ -140,6 +114,8 @@ class Linkage:
         for k in self.moment_values:
             if k not in links:
                 raise ValueError(f"{self.name}: moments: {k!r} is not a link; {did_you_mean(k, links, 'links')}")
+        self.elements = read_elements(self.name, self.points, links, ground, dict(
+            springs=springs, torsion_springs=torsion_springs, gas_springs=gas_springs, dampers=dampers, rotary_dampers=rotary_dampers))
         self.extra = {k: float(v) for k, v in dict(params or {}).items()}
         self.links = links
         self.ground = ground
@@ -148,7 +124,8 @@ class Linkage:
             name="linkage", points=tuple(self.points), links=tuple((k, tuple(v)) for k, v in links.items()),
             ground=tuple(ground), actuators=tuple(acts.items()), sliders=tuple(block_of.items()), slots=tuple(slot_specs),
             drivers=drivers, gravity=(-1j if g_vec is None or abs(g_vec) == 0 else g_vec / abs(g_vec)),
-            forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra))
+            forces=tuple(force_specs), moments=tuple(self.moment_values), loads=tuple(loads), extra=tuple(self.extra),
+            elements=self.elements.specs)
         try:
             # the links whose centre of mass and inertia follow from their joints, by the
             # shape the drawing gives them
@@ -326,9 +303,6 @@ class Linkage:
             vals[f"Fx_{x}"], vals[f"Fy_{x}"] = f.real, f.imag
         vals.update({f"M_{k}": v for k, v in self.moment_values.items()})
         vals.update(self.extra)
-        missing = [n for n in self.model.parameters if n not in vals]
-        if missing:
-            raise ValueError(f"{self.name}: give the values of the loads' parameters {missing} in params=")
 
         def at_drawing(recipe):
             if recipe[0] == "angle":
@@ -341,6 +315,10 @@ class Linkage:
 
         self._guess = np.array([at_drawing(r) for r in b.coords.values()], float)
         self._u0 = np.array([at_drawing(r) for r in b.inputs.values()], float)
+        vals.update(drawing_values(self.model, self.elements, self._guess, self._u0, vals))
+        missing = [n for n in self.model.parameters if n not in vals]
+        if missing:
+            raise ValueError(f"{self.name}: give the values of the loads' parameters {missing} in params=")
         return {k: vals[k] for k in self.model.parameters}
 
     # ----------------------------------------------------------------- what it is
@@ -464,6 +442,16 @@ class Linkage:
         u = self._stroke(u, "u")
         samples = check_samples(self.mechanism, Samples(u, 0.0, 0.0, np.full(u.shape[:1], float(t))))
         return self.inverse_dynamics(samples, p=p, quasi_static=True, options=options)
+
+    def power(self, drive, t=None, p: Mapping | None = None, *, options: SolverOptions = SolverOptions()) -> PowerBalance:
+        """Where the power goes along a drive law at times `t` (or ``Samples``): per sample
+        (W) the drive's input power, the rates of kinetic and potential energy (gravity and
+        springs), the dampers' dissipation, the power delivered to the other loads and the
+        balance's residual; ``.efficiency`` the stroke's (see ``dynamics.power``)."""
+        res = self.inverse_dynamics(drive, t, p, options=options)
+        names = lambda kinds: tuple(load_name(e) for e in self.elements.specs if e.kind in kinds)  # noqa: E731
+        out = power_balance(self.model, res, self._p(p), stored=names(STORING), dissipated=names(DISSIPATING))
+        return out._replace(elements={e.name: out.elements[load_name(e)] for e in self.elements.specs})
 
     def mass_properties(self, p: Mapping | None = None) -> dict:
         """``{link: (mass (kg), centre of mass (complex, m, at the drawing's pose), inertia

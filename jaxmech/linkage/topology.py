@@ -26,6 +26,7 @@ from collections import deque
 from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
 from ..dynamics.model import Body, Gravity, Model, Moment, PointForce
 from ..mechanism import Mechanism
+from .elements import element_loads, element_parameters
 from .mass import shape_properties
 from .terms import Term, angle_value, negate, value
 
@@ -46,7 +47,8 @@ class Topology:
       actuator (length) names.
     - `gravity`: the unit direction of gravity; `forces`: ``((point, body), ...)`` constant
       forces; `moments`: links with a constant moment; `loads`: the user's own loads;
-      `extra`: the user's own model parameter names.
+      `extra`: the user's own model parameter names; `elements`: springs and dampers
+      (``elements.Element``), loads of the model with parameters of their own.
     """
 
     name: str
@@ -63,6 +65,7 @@ class Topology:
     loads: tuple = ()
     extra: tuple[str, ...] = ()
     mass_shapes: tuple = ()
+    elements: tuple = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -423,10 +426,11 @@ def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
         loads.append(PointForce(x, lambda q, u, p, v, t, x=x: p[f"Fx_{x}"] + 1j * p[f"Fy_{x}"], name=f"force at {x}", body=body))
     for link in top.moments:
         loads.append(Moment(angle_spec(link), lambda q, u, p, v, t, link=link: p[f"M_{link}"], name=f"moment on {link}", body=link))
-    loads += list(top.loads)
+    loads += element_loads(top.elements, b.theta, values) + list(top.loads)
     derived = {link for link, (_, _, _, j) in _shapes(b).items() if j}
     own = [f"{k}_{link}" for link in b.links for k in ("m", "J") if k == "m" or link not in derived] + ["g"]
     own += [f"F{c}_{x}" for x, _ in top.forces for c in "xy"] + [f"M_{link}" for link in top.moments]
+    own += [n for e in top.elements for n in element_parameters(e)]
     own += [n for n in top.extra if n not in own]
     # Every function of the model is written here from the topology (covered by the stored
     # programs' source hash), so the topology identifies it; a user's own loads do not.
