@@ -17,8 +17,7 @@ import numpy as np
 from ..options import SolverOptions
 from ..scenes.base import Scene, as_scene
 from ..scenes.evaluation import SCENE_OPTIONS
-from ..status import Status
-from ..scenes.columns import design_columns
+from ..scenes.columns import LazyColumns, design_motion
 
 __all__ = ["SceneFigure", "as_batch", "figure_value", "peak", "scene_figure"]
 
@@ -81,6 +80,24 @@ def peak(values, mode: str = "argmax", *, axis: int = -1, where=None, temperatur
 
 
 # =========================================================================== figures
+class _Finite(Mapping):
+    """A columns mapping read through ``where(isfinite, value, 0)``: finite placeholders at
+    failed samples (the figure is NaN there anyway), so no NaN reaches a gradient."""
+
+    def __init__(self, columns: Mapping):
+        self._columns = columns
+
+    def __getitem__(self, name):
+        v = self._columns[name]
+        return jnp.where(jnp.isfinite(v), v, 0.0)
+
+    def __iter__(self):
+        return iter(self._columns)
+
+    def __len__(self):
+        return len(self._columns)
+
+
 @dataclasses.dataclass(frozen=True)
 class SceneFigure:
     """A scalar figure of merit of one scene design: ``f(p) -> (value, ok)``.
@@ -109,9 +126,10 @@ class SceneFigure:
         fixed = dict(self.fixed)
         dtype = jnp.result_type(*[jnp.asarray(v) for v in p.values()], float)
         full = {k: jnp.asarray(p[k] if k in p else fixed.get(k, v), dtype) for k, v in self.scene.defaults.items()}
-        cols, status = design_columns(self.scene, self.points, full, options=self.options)
-        ok = jnp.all(status == Status.CONVERGED)
-        cols = {k: jnp.where(jnp.isfinite(v), v, 0.0) for k, v in cols.items()}
+        mo, converged = design_motion(self.scene, self.points, full, options=self.options)
+        ok = jnp.all(converged)
+        # read lazily: a figure of the effort alone never traces every joint's reaction
+        cols = _Finite(LazyColumns(self.scene, full, mo))
         value = jnp.asarray(self.reduce(cols, full))
         if value.shape != ():
             raise ValueError(f"figure {self.name!r}: reduce must return a scalar, got shape {value.shape}")

@@ -29,9 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..kinematics import point_kinematics
 from ..scenes.base import as_scene
-from ..scenes.columns import column_names, table_columns
+from ..scenes.columns import LazyColumns, column_names
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..status import Status
 from .constrained import Stated
@@ -40,45 +39,6 @@ from .sqp import SQPOptions
 from .stroke_problem import StrokeProblem
 
 __all__ = ["scene_problem", "refine", "best_designs"]
-
-
-class _Columns(Mapping):
-    """A scene's table columns ``{NAME[UNIT]: (N,)}`` at one design's motion, each computed
-    when read: the motion's own columns directly, an output by its part's function where
-    the scene gives one (``Outputs.parts``: a drive's effort without every joint's
-    reaction), else with all outputs.  What the statement does not read is never traced,
-    so it stays out of the design program's second derivatives."""
-
-    def __init__(self, scene, p, mo):
-        self._scene, self._p, self._mo, self._names, self._read = scene, p, mo, column_names(scene), {}
-
-    def __getitem__(self, name):
-        if name not in self._read:
-            if name not in self._names:
-                raise KeyError(f"scene {self._scene.name!r} has no column {name!r}; its columns are: {', '.join(self._names)}")
-            self._read[name] = self._column(name)
-        return self._read[name]
-
-    def _column(self, name: str):
-        scene, mo = self._scene, self._mo
-        motion = table_columns(scene, mo, {})
-        if name in motion:
-            return motion[name]
-        out = name.partition("[")[0]
-        if out in scene.outputs.parts:
-            return scene.outputs.one(out, self._p, mo)
-        if "outputs" not in self._read:  # every output at once, with the points they may read
-            mech = scene.mechanism
-            pts = jax.vmap(lambda q, qd, qdd, u, ud, udd: point_kinematics(mech, tuple(mech.points), self._p, q, qd, qdd, u, ud, udd))(
-                mo.q, mo.q_dot, mo.q_ddot, mo.u, mo.u_dot, mo.u_ddot)
-            self._read["outputs"] = table_columns(scene, dataclasses.replace(mo, points=pts), scene.outputs(self._p, dataclasses.replace(mo, points=pts)))
-        return self._read["outputs"][name]
-
-    def __iter__(self):
-        return iter(self._names)
-
-    def __len__(self):
-        return len(self._names)
 
 
 def _reader(scene, what, label: str) -> Callable:
@@ -164,7 +124,7 @@ def scene_problem(scene, bounds: Mapping[str, tuple[float, float]], *, peak, lim
     rows_le = _limit_rows(scene, limits)
 
     def rows(p, mo):
-        cols = _Columns(scene, p, mo)
+        cols = LazyColumns(scene, p, mo)
         le = []
         for fn, low, high in rows_le:
             v = jnp.ravel(fn(cols, p))

@@ -11,12 +11,14 @@ with ``_dot``/``_ddot``, the scene's outputs in the order and units of
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 
+from ..kinematics import point_kinematics
 from ..options import SolverOptions
 from ..status import Status
 from .evaluation import SCENE_OPTIONS, outputs_stage, scene_motion, stroke_stage
@@ -27,6 +29,7 @@ if TYPE_CHECKING:  # a Scene is only read here (its mechanism, units, outputs)
     from .base import Scene
 
 __all__ = [
+    "LazyColumns",
     "batch_columns",
     "part_columns",
     "column_names",
@@ -131,3 +134,46 @@ def design_status(status, xp=jnp):
     first = xp.argmax(bad, axis=-1)
     code = xp.take_along_axis(status, first[..., None], axis=-1)[..., 0]
     return xp.where(xp.any(bad, axis=-1), code, int(Status.CONVERGED)).astype(xp.int32)
+
+
+class LazyColumns(Mapping):
+    """A scene's table columns ``{NAME[UNIT]: (N,)}`` at one design's motion (status
+    excepted, unmasked), each computed when read: the motion's own columns directly, an
+    output by its part's function where the scene gives one (``Outputs.parts``: a drive's
+    effort without every joint's reaction), else with all outputs (the named points'
+    kinematics computed first when the motion has none).  What a figure or a design
+    statement does not read is never traced, so it stays out of its program and of its
+    derivatives."""
+
+    def __init__(self, scene, p, mo):
+        self._scene, self._p, self._mo, self._names, self._read = scene, p, mo, column_names(scene), {}
+
+    def __getitem__(self, name):
+        if name not in self._read:
+            if name not in self._names:
+                raise KeyError(f"scene {self._scene.name!r} has no column {name!r}; its columns are: {', '.join(self._names)}")
+            self._read[name] = self._column(name)
+        return self._read[name]
+
+    def _column(self, name: str):
+        scene, mo = self._scene, self._mo
+        motion = table_columns(scene, mo, {})
+        if name in motion:
+            return motion[name]
+        out = name.partition("[")[0]
+        if out in scene.outputs.parts:
+            return scene.outputs.one(out, self._p, mo)
+        if "outputs" not in self._read:  # every output at once, with the points they may read
+            mech = scene.mechanism
+            if not mo.points and mech.points:
+                pts = jax.vmap(lambda q, qd, qdd, u, ud, udd: point_kinematics(mech, tuple(mech.points), self._p, q, qd, qdd, u, ud, udd))(
+                    mo.q, mo.q_dot, mo.q_ddot, mo.u, mo.u_dot, mo.u_ddot)
+                mo = dataclasses.replace(mo, points=pts)
+            self._read["outputs"] = table_columns(scene, mo, scene.outputs(self._p, mo))
+        return self._read["outputs"][name]
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
