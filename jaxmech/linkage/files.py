@@ -2,9 +2,10 @@
 
 The keys are ``Linkage``'s arguments (``points``, ``links``, ``ground``, ``driver``,
 ``sliders``, ``slots``, ``actuators``, ``mass``, ``inertia``, ``centre``, ``gravity``,
-``forces``, ``moments``, ``name``) plus an optional ``[stroke]`` table for the command line:
-``from``, ``to`` (the driven input's range, SI or with a unit: ``"0deg"``), ``speed`` (rad/s or
-m/s) and ``summary``.  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
+``forces``, ``moments``, the springs and dampers ``springs``, ``torsion_springs``,
+``gas_springs``, ``dampers``, ``rotary_dampers``, ``name``) plus an optional ``[stroke]``
+table for the command line: ``from``, ``to`` (the driven input's range, SI or with a unit:
+``"0deg"``), ``speed`` (rad/s or m/s) and ``summary``.  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
 """
 
 from __future__ import annotations
@@ -15,12 +16,13 @@ import sys
 from pathlib import Path
 
 from ..names import near_hint
+from .elements import ARGUMENTS
 from .spec import Linkage
 
 __all__ = ["read_linkage_file", "load_linkage", "LINKAGE_KEYS"]
 
 LINKAGE_KEYS = ("name", "points", "links", "ground", "driver", "sliders", "slots", "actuators", "mass", "inertia",
-                "centre", "gravity", "forces", "moments")
+                "centre", "gravity", "forces", "moments", *ARGUMENTS)
 STROKE_KEYS = ("from", "to", "speed", "summary")
 
 

@@ -26,7 +26,10 @@ __all__ = ["linkage_scene", "scene_from_file", "PARAMETER_UNITS"]
 
 #: SI unit of a linkage parameter by its prefix.
 PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", "m_": "kg", "J_": "kg m^2",
-                   "Fx_": "N", "Fy_": "N", "M_": "N m", "g": "m/s^2"}
+                   "Fx_": "N", "Fy_": "N", "M_": "N m", "g": "m/s^2",
+                   # springs and dampers (linkage.elements)
+                   "k_": "N/m", "L0_": "m", "F0_": "N", "kt_": "N m/rad", "phi0_": "rad", "Lg_": "m", "n_": "-",
+                   "c_": "N s/m", "ct_": "N m s/rad"}
 
 
 def _unit(name: str) -> str:
