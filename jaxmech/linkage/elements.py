@@ -11,16 +11,14 @@ to the first.  As loads of the model they enter inverse dynamics, statics, equil
 every joint's reaction like any other; their numbers are named parameters of the linkage,
 so that sweeps and designs vary them:
 
-================  =======================================================  ============================
-element           law                                                      parameters
-================  =======================================================  ============================
-spring            ``T = F0 + k (L - L0)``                                  ``k_`` N/m, ``L0_`` m, ``F0_`` N
-torsion spring    ``M = -kt (phi_b - phi_a - phi0)``                       ``kt_`` N m/rad, ``phi0_`` rad
-gas spring        push ``F = F0`` (constant), or                           ``F0_`` N
-                  ``F = F0 (Lg / (Lg - (L0 - L)))^n`` (polytropic)         ``+ L0_``, ``Lg_`` m, ``n_`` -
-damper            ``T = c dL/dt``                                          ``c_`` N s/m
-rotary damper     ``M = -ct (omega_b - omega_a)``                          ``ct_`` N m s/rad
-================  =======================================================  ============================
+| element | law | parameters |
+|---|---|---|
+| spring | ``T = F0 + k (L - L0)`` | ``k_`` N/m, ``L0_`` m, ``F0_`` N |
+| torsion spring | ``M = -kt (phi_b - phi_a - phi0)`` | ``kt_`` N m/rad, ``phi0_`` rad |
+| gas spring | push ``F = F0`` (constant) | ``F0_`` N |
+| gas spring, polytropic | push ``F = F0 (Lg / (Lg - (L0 - L)))^n`` | ``F0_`` N, ``L0_`` m, ``Lg_`` m, ``n_`` - |
+| damper | ``T = c dL/dt`` | ``c_`` N s/m |
+| rotary damper | ``M = -ct (omega_b - omega_a)`` | ``ct_`` N m s/rad |
 
 ``phi_a``, ``phi_b`` are the angles of the two bodies' frames (ground's is 0); ``phi0_``'s
 value in ``Linkage.params`` is their difference in the drawing plus the spring's free angle.
