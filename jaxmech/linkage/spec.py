@@ -447,7 +447,8 @@ class Linkage:
         """Where the power goes along a drive law at times `t` (or ``Samples``): per sample
         (W) the drive's input power, the rates of kinetic and potential energy (gravity and
         springs), the dampers' dissipation, the power delivered to the other loads and the
-        balance's residual; ``.efficiency`` the stroke's (see ``dynamics.power``)."""
+        balance's residual; ``.work()`` each over the samples' times and ``.efficiency`` the
+        stroke's (a ``Samples`` drive needs its times ``t`` for them; see ``dynamics.power``)."""
         res = self.inverse_dynamics(drive, t, p, options=options)
         names = lambda kinds: tuple(load_name(e) for e in self.elements.specs if e.kind in kinds)  # noqa: E731
         out = power_balance(self.model, res, self._p(p), stored=names(STORING), dissipated=names(DISSIPATING))
