@@ -268,6 +268,8 @@ def _pair(d: _Drawing, spec: Mapping, what: str) -> tuple:
 
 
 def _not_negative(spec: Mapping, key: str, unit: str, what: str, default=None) -> float:
+    """``spec[key]`` in `unit`, refused when negative (a stiffness, a damping: a negative one
+    would put energy in), or missing without a `default`."""
     if key not in spec and default is not None:
         return default
     if key not in spec:
