@@ -78,7 +78,8 @@ def sweep(scene, bounds: dict, designs: int, out: str):
 
 def refined(scene, bounds: dict, out: str, starts: int):
     """Step 3: the `starts` best feasible designs of the dataset, refined in one call."""
-    return refine(scene, out, bounds, peak=EFFORT, limits={"transmission": (sin_mu, 0.5, None)},
+    designs = read_dataset(out, columns=[*bounds, "status", TORQUE, QUALITY])
+    return refine(scene, designs, bounds, peak=EFFORT, limits={"transmission": (sin_mu, 0.5, None)},
                   best=starts, rank=TORQUE, where={QUALITY: (0.5, None)}, points=POINTS)
 
 

@@ -11,8 +11,8 @@ step after it refines the best few under the same statement, stated once:
   `peak` and `limits` read the scene's table columns (``NAME[UNIT]``, as ``run_scene`` and
   sweeps name them) at every sample.
 - ``refine(scene, designs, bounds, peak=..., limits=..., best=K, rank=FIGURE)``: the `best`
-  designs of a sweep result, a sweep's Parquet dataset or a table (those that converged,
-  within `where`, least `rank` first) refined in one ``minimize_second_order`` call (every
+  designs of a sweep result, a sweep's Parquet dataset (``read_dataset(folder)``) or a
+  table (those that converged, within `where`, least `rank` first) refined in one ``minimize_second_order`` call (every
   start in one vmapped program, the Lagrangian's Hessian by the second-order adjoint).
 
 A trial design whose stroke does not close at every sample is not assembled: the SQP
@@ -139,21 +139,25 @@ def scene_problem(scene, bounds: Mapping[str, tuple[float, float]], *, peak, lim
 
 
 def _table(designs) -> dict:
-    """``{column: (D,) numpy}`` of a ``SweepResult``, a sweep dataset folder or a table."""
-    from ..sweep.result import SweepResult
-
-    if isinstance(designs, SweepResult):
+    """``{column: (D,) numpy}`` of a sweep's designs: a ``SweepResult`` (its parameters and
+    per-point statuses), a table read from a dataset (``jaxmech.sweep.read_dataset``: a
+    ``pyarrow.Table``; or a pandas ``DataFrame``), or ``{column: (D,)}``.  (The design layer
+    reads what a sweep returns; it does not import the sweeps.)"""
+    if hasattr(designs, "params") and hasattr(designs, "status") and hasattr(designs, "columns"):  # a SweepResult
         return {**{k: np.asarray(v) for k, v in designs.params.items()}, "status": np.asarray(designs.status)}
+    if hasattr(designs, "column_names") and hasattr(designs, "column"):  # a pyarrow Table
+        return {k: designs.column(k).to_numpy(zero_copy_only=False) for k in designs.column_names}
+    if hasattr(designs, "to_dict") and hasattr(designs, "columns"):  # a pandas DataFrame
+        return {k: designs[k].to_numpy() for k in designs.columns}
     if isinstance(designs, Mapping):
         return {k: np.asarray(v) for k, v in designs.items()}
-    from ..sweep.dataset_read import read_dataset
-
-    table = read_dataset(designs)
-    return {k: table.column(k).to_numpy(zero_copy_only=False) for k in table.column_names}
+    raise ValueError("designs: give a sweep's result (sweep_scene), its dataset as a table (jaxmech.sweep.read_dataset(folder)) "
+                     f"or a mapping {{column: (D,) values}}, got {type(designs).__name__}")
 
 
 def best_designs(designs, names, *, best: int = 256, rank: str | None = None, where: Mapping | None = None) -> dict:
-    """The `best` rows of a sweep (``SweepResult``, dataset folder, or ``{column: (D,)}``)
+    """The `best` rows of a sweep (a ``SweepResult``, a dataset read by ``read_dataset``, or
+    ``{column: (D,)}``)
     as ``{name: (K,)}`` plus ``"row"`` (their row numbers): rows that converged
     at every sample (``status``: a dataset's per design, a ``SweepResult``'s per point),
     within every ``where = {column: (low, high)}`` (None: open), least `rank` first (the
@@ -191,6 +195,10 @@ def refine(scene, designs, bounds: Mapping[str, tuple[float, float]], *, peak, l
            rank: str | None = None, where: Mapping | None = None, points: int = 37, peak_scale: float | None = None,
            options: SQPOptions = SQPOptions()) -> SecondOrderResult:
     """Refine the `best` designs of a sweep under a stated objective and limits, in one call.
+
+    `designs`: a ``SweepResult``, a sweep's dataset as a table (``read_dataset(folder)``, a
+    pandas ``DataFrame`` of it) or ``{column: (D,)}``, holding the design variables (the
+    names of `bounds`), `rank` and the `where` columns (and ``status``, where given).
 
     ``best_designs(designs, bounds, best=, rank=, where=)`` picks the starts (converged
     rows, least `rank` first); ``scene_problem(scene, bounds, peak=, limits=, points=)``
