@@ -7,7 +7,10 @@ the per-body Newton-Euler equations at every sample of the stroke.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import re
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -22,7 +25,7 @@ from ..units import to_si
 from .base import Scene
 from .outputs import Outputs
 
-__all__ = ["linkage_scene", "scene_from_file", "PARAMETER_UNITS"]
+__all__ = ["linkage_scene", "scene_from_file", "FileScene", "PARAMETER_UNITS"]
 
 #: SI unit of a linkage parameter by its prefix.
 PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", "m_": "kg", "J_": "kg m^2",
@@ -141,8 +144,37 @@ def linkage_scene(lk: Linkage, stroke=None, speed: float = 1.0, summary: str | N
         parameters=params)
 
 
-def scene_from_file(path) -> Scene:
-    """The scene of a linkage file (TOML or JSON; its ``[stroke]`` table sets the stroke)."""
+@dataclasses.dataclass(frozen=True, eq=False)
+class FileScene(Scene):
+    """The ``Scene`` of a linkage file, keyed by what it was built from: `content` is a
+    SHA-256 of the file's bytes, its name, the stroke, the speed and the stroke start's
+    coordinates, so that the stored programs of one file serve every later process that
+    reads the same file (a registry scene is keyed by its name instead)."""
+
+    content: str = ""
+
+    @property
+    def program_key(self) -> str | None:
+        """``"linkage file <content>"`` (see the class); None without a content key."""
+        return f"linkage file {self.content}" if self.content else None
+
+
+def _content_key(data: bytes, scene: Scene) -> str:
+    """What determines a file scene's programs besides the package's source (which the
+    store's key holds): the file's bytes, the scene's name, its stroke, speed and guess (the
+    guess is a constant inside the stroke's program)."""
+    p = {k: float(v) for k, v in scene.defaults.items()}
+    u0, u1 = (float(x) for x in scene.stroke(p))
+    guess = np.asarray(scene.guess(p), np.float64)
+    digest = hashlib.sha256(data)
+    digest.update(repr((scene.name, u0, u1, float(scene.speed))).encode() + guess.tobytes())
+    return digest.hexdigest()
+
+
+def scene_from_file(path) -> FileScene:
+    """The scene of a linkage file (TOML or JSON; its ``[stroke]`` table sets the stroke),
+    keyed by the file's content for the store of compiled programs (``FileScene``)."""
+    data = Path(path).read_bytes()
     lk, stroke = read_linkage_file(path)
     name = lk.mechanism.inputs[0] if lk.mechanism.dof == 1 else ""
     unit = "m" if name in lk.mechanism.lengths else "rad"
@@ -152,4 +184,6 @@ def scene_from_file(path) -> Scene:
             raise ValueError(f"{lk.name}: [stroke] needs both from and to")
         rng = tuple(to_si(str(stroke[k]), unit) for k in ("from", "to"))
     speed = to_si(str(stroke.get("speed", 1.0)), unit + "/s")
-    return linkage_scene(lk, rng, speed, stroke.get("summary"))
+    scene = linkage_scene(lk, rng, speed, stroke.get("summary"))
+    fields = {f.name: getattr(scene, f.name) for f in dataclasses.fields(Scene)}
+    return FileScene(**fields, content=_content_key(data, scene))
