@@ -16,7 +16,7 @@ from benchmarks.common import base_parser
 _HERE = Path(__file__).resolve().parent
 #: Every benchmark script: a module with ``main(argv)`` accepting ``--quick`` and ``--out``.
 BENCHMARKS = tuple(
-    n for n in ("latency", "kinematics", "speed_error", "scaling", "dynamics", "design", "sweep_scale", "gaps", "flap_torque", "live") if (_HERE / f"{n}.py").exists()
+    n for n in ("latency", "kinematics", "speed_error", "scaling", "dynamics", "design", "sweep_scale", "gaps", "workflow", "flap_torque", "live") if (_HERE / f"{n}.py").exists()
 )
 
 
