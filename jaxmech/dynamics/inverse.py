@@ -23,12 +23,14 @@ from ..options import SolverOptions
 from ..positions import solve_one
 from ..status import Status
 from ..xla import jit
+from .friction import JointFriction, friction_reactions, friction_signs, joint_speeds
 from .joints import Prismatic, Slot, joint_name
 from .model import Model, mechanism_params, prepare_params
 from .reactions import joint_axes, joint_reactions
 from .virtual_power import balance, loaded_state
 
-__all__ = ["InverseDynamics", "JointBodies", "inverse_dynamics", "inverse_dynamics_at", "inverse_dynamics_batch", "statics"]
+__all__ = ["InverseDynamics", "JointBodies", "Holding", "holding", "inverse_dynamics", "inverse_dynamics_at", "inverse_dynamics_batch",
+           "statics"]
 
 
 class JointBodies(NamedTuple):
@@ -63,7 +65,12 @@ class InverseDynamics:
       guide and every slot at each sample, along which its normal force acts.
     - `joint_bodies`: a ``JointBodies`` (joint, first and second body, the driven slider's
       input index) per joint, in the order of ``Model.joints`` (static).
-    - `status`: position-solve ``Status`` per sample (NaN results where not CONVERGED).
+    - `status`: position-solve ``Status`` per sample (NaN results where not CONVERGED;
+      with joint friction, ``MAX_STEPS`` where the friction's Newton did not converge).
+    - `joint_friction`: with joint friction (``friction=``), ``{joint: f}`` each joint's
+      friction load on its second body: a pin's moment (N m, CCW), a guide's or slot's
+      force along its direction (N) (``dynamics.friction``); `tau` and `joints` include
+      it.  The loop multipliers `reactions` do not.
     """
 
     t: jax.Array
@@ -82,6 +89,7 @@ class InverseDynamics:
     joint_normals: dict = dataclasses.field(default_factory=dict)
     loops: tuple = dataclasses.field(metadata=dict(static=True), default=())
     joint_bodies: tuple = dataclasses.field(metadata=dict(static=True), default=())
+    joint_friction: dict = dataclasses.field(default_factory=dict)
 
     def reaction(self, name):
         """The reaction named `name` (N, complex ``Fx + i Fy``, one per sample):
@@ -157,9 +165,11 @@ class InverseDynamics:
         return jnp.real(self.joints[joint] * jnp.conj(self.joint_normals[joint]))
 
 
-def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2):
+def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2, signs=None, speeds=None, friction=None):
     """Everything at one sample from its position and per-unit-input derivatives: the rates,
-    the points' kinematics, the drive efforts, multipliers and joint reactions."""
+    the points' kinematics, the drive efforts, multipliers and joint reactions; with
+    `friction`, the reactions and efforts with joint friction (`signs` and `speeds` of the
+    joints' relative motion, ``dynamics.friction``)."""
     mech = model.mechanism
     ok = jnp.all(jnp.isfinite(q))
     qs = jnp.where(ok, q, 0.0)
@@ -170,8 +180,13 @@ def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2
     pts = point_kinematics(mech, names, p, qs, qd, qdd, u, ud, udd)
     out = dict(tau=tau, reactions=lam, q_dot=nan(qd), q_ddot=nan(qdd), points=jax.tree_util.tree_map(nan, pts), joints={},
                joint_moments={}, joint_normals={})
-    if model.joints:
+    if model.joints and friction is not None:
+        fres = friction_reactions(model, friction, st, signs, speeds)
+        out.update(tau=tau + fres.efforts, joints=fres.forces, joint_moments=fres.moments, friction_ok=fres.converged,
+                   joint_friction={fj.joint: fres.friction[k] for k, fj in enumerate(friction.joints)})
+    elif model.joints:
         _, out["joints"], out["joint_moments"] = joint_reactions(model, st)
+    if model.joints:
         out["joint_normals"] = {joint_name(j): nan(joint_axes(model, j, st.q, st.u, st.p)[1])
                                 for j in model.joints if isinstance(j, (Prismatic, Slot))}
     return out
@@ -267,7 +282,7 @@ def _along(model, quasi_static, names, drive_static, drive_leaves, p, t, q, d1, 
 
 
 def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, guess=None, *, quasi_static: bool = False,
-                     options: SolverOptions = SolverOptions()) -> InverseDynamics:
+                     options: SolverOptions = SolverOptions(), friction: JointFriction | None = None) -> InverseDynamics:
     """Driving force/torque and reactions along a drive (one design).
 
     **Arguments**
@@ -278,6 +293,9 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     - `t`: ``(N,)`` times (s) in order; positions are solved by continuation along them.
     - `p`: parameters; `guess`: coordinates at the first sample (picks the branch).
     - `quasi_static`: leave inertia out.
+    - `friction`: joint friction (``dynamics.friction.JointFriction``; its parameters in
+      `p`), its sign regularised over this stroke's joint speeds; None: none (the
+      frictionless program, unchanged).
 
     **Returns** an ``InverseDynamics`` with leading axis ``N``; NaN where the position
     status is not ``CONVERGED``.
@@ -288,13 +306,128 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     if p is None or guess is None:
         raise ValueError(f"{mech.name}: inverse_dynamics needs the parameters p= and a guess= at the first sample")
     drive, us, t = drive_samples(mech, drive, t)
-    model.check_params(p)
+    extra = _friction_names(model, friction)
+    model.check_params(p, extra)
     # positions, dq/du and d2q/du2 in one compiled pass; the drive's rates give the rest
     sol, d1, d2 = stroke(mech, us, mechanism_params(model, p), guess, options, derivs=True)
     dtype = sol.q.dtype
-    pj = prepare_params(model, p, dtype)
+    pj = prepare_params(model, p, dtype, extra)
     static, leaves = split_drive(drive)
     if leaves is not None:
         leaves = [jnp.asarray(x, dtype) for x in leaves]
-    u, ud, udd, out = _along(model, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype), sol.q, d1, d2)
-    return _result(model, t, u, ud, udd, dict(out, q=sol.q, status=sol.status))
+    if friction is None:
+        u, ud, udd, out = _along(model, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype), sol.q, d1, d2)
+        return _result(model, t, u, ud, udd, dict(out, q=sol.q, status=sol.status))
+    u, ud, udd, out = _along_friction(model, friction, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype),
+                                      sol.q, d1, d2)
+    return _result(model, t, u, ud, udd, _with_friction_status(out, sol.q, sol.status))
+
+
+def _friction_names(model: Model, friction: JointFriction | None) -> tuple:
+    """The parameter names joint friction adds to the model's (checked against the model)."""
+    if friction is None:
+        return ()
+    if not isinstance(friction, JointFriction):
+        raise ValueError(f"friction= takes a dynamics.friction.JointFriction (or None), got {type(friction).__name__}")
+    if not model.joints:
+        raise ValueError("friction= needs a model with joints= (a Linkage has them): friction acts at the joints")
+    friction.check(model)
+    return tuple(n for n in friction.parameters if n not in model.parameters)
+
+
+def _speed_scale(speeds):
+    """Each joint's speed scale ``W (k,)``: its largest finite ``|w|`` over the samples."""
+    return jnp.max(jnp.where(jnp.isfinite(speeds), jnp.abs(speeds), 0.0), axis=0, initial=0.0)
+
+
+def _speeds(model, friction, p, u, ud, udd, q, d1, d2):
+    """The joints' relative speeds at one sample of a stroke (zero where it failed)."""
+    ok = jnp.all(jnp.isfinite(q))
+    qd, _ = chain_rule(jnp.where(ok, d1, 0.0), jnp.where(ok, d2, 0.0), ud, udd)
+    return joint_speeds(model, friction, jnp.where(ok, q, 0.0), u, p, qd, ud)
+
+
+def _with_friction_status(out: dict, q, status) -> dict:
+    """The samples' fields with ``MAX_STEPS`` where the position converged but friction did not."""
+    ok = out.pop("friction_ok")
+    status = jnp.where((status == Status.CONVERGED) & ~ok, jnp.asarray(Status.MAX_STEPS, status.dtype), status)
+    return dict(out, q=q, status=status)
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4))
+def _along_friction(model, friction, quasi_static, names, drive_static, drive_leaves, p, t, q, d1, d2):
+    drive = join_drive(drive_static, drive_leaves)
+    u, ud, udd = drive_rates(drive, t, model.mechanism.dof)
+    w = jax.vmap(lambda *a: _speeds(model, friction, p, *a))(u, ud, udd, q, d1, d2)
+    signs = friction_signs(friction, w, _speed_scale(w))
+    out = jax.vmap(lambda *a: _sample(model, quasi_static, names, p, *a, friction=friction))(t, u, ud, udd, q, d1, d2, signs, w)
+    return AlongDrive(u, ud, udd, out)
+
+
+class Holding(NamedTuple):
+    """Statics with joint friction (``holding``): what holds the linkage at each pose.
+
+    - `up`: an ``InverseDynamics`` at rest whose `tau` is the effort that drives the
+      linkage on, in the input's positive sense (along ``direction``), friction opposing
+      that motion (the effort to raise a load);
+    - `back`: the same holding it back: the effort at which it starts to move the other
+      way, friction helping the drive (the effort to lower a load, negative where it
+      must be pulled down); ``back.tau <= up.tau`` with the frictionless effort between;
+    - `self_locking` ``(...)``: True where zero lies between them for every input: with
+      the drive released the linkage stays put (friction alone holds the loads).
+    """
+
+    up: InverseDynamics
+    back: InverseDynamics
+    self_locking: jax.Array
+
+
+@functools.partial(jit, static_argnums=(0, 1, 2))
+def _holding_batch(model, friction, options, u, direction, p, t, guess):
+    mech, names = model.mechanism, tuple(model.mechanism.points)
+
+    def position(u_, p_, g_):
+        sol = solve_one(mech, u_, mechanism_params(model, p_), g_, options)
+        ok = sol.status == Status.CONVERGED
+        d1, d2 = input_derivatives(mech, jnp.where(ok, sol.q, 0.0), u_, mechanism_params(model, p_), ok)
+        return sol.q, sol.status, d1, d2
+
+    q, status, d1, d2 = jax.vmap(position)(u, p, guess)
+    zero = jnp.zeros_like(u)
+    w = jax.vmap(lambda *a: _speeds(model, friction, *a))(p, u, direction, zero, q, d1, d2)
+    signs = friction_signs(friction, w, _speed_scale(w))  # the sense each joint moves in, per unit input rate
+
+    def at_rest(sg):  # the loads at rest (no rate), friction along the sense `sg`, no viscous term
+        one = lambda *a: _sample(model, True, names, *a, friction=friction)  # noqa: E731
+        return _with_friction_status(jax.vmap(one)(p, t, u, zero, zero, q, d1, d2, sg, jnp.zeros_like(w)), q, status)
+
+    return at_rest(signs), at_rest(-signs)
+
+
+def holding(model: Model, u, p: Mapping, guess, friction: JointFriction, *, direction=None, t=0.0,
+            options: SolverOptions = SolverOptions()) -> Holding:
+    """Statics with joint friction at a batch of poses ``u (..., dof)``: the effort that
+    drives the linkage on and the one that holds it back, and where it is self-locking (a
+    ``Holding``).  `guess` ``(..., m)`` picks each pose's branch; `direction` ``(dof,)``
+    the sense "on" means (default +1 on every input); friction's sign is regularised over
+    the batch's joint speeds per unit input rate (``dynamics.friction``), so a joint that
+    barely turns at a pose (a toggle) carries less of its friction there."""
+    mech = model.mechanism
+    extra = _friction_names(model, friction)
+    if friction is None:
+        raise ValueError("holding: give friction= (a JointFriction); without friction the holding effort is statics()'s")
+    u, guess = as_inputs(mech, u), as_coords(mech, guess)
+    direction = jnp.ones((mech.dof,)) if direction is None else as_inputs(mech, direction, "direction")
+    dtype = jnp.result_type(u, guess, float)
+    p = prepare_params(model, p, dtype, extra)
+    shape = batch_shape(mech, {"u": u.shape[:-1], "guess": guess.shape[:-1], **{f"p[{k!r}]": v.shape for k, v in p.items()}})
+    n = int(np.prod(shape, dtype=np.int64))
+    flat = lambda x, k: jnp.broadcast_to(x, shape + x.shape[x.ndim - k:]).reshape((n,) + x.shape[x.ndim - k:])  # noqa: E731
+    uf = flat(u.astype(dtype), 1)
+    args = (uf, flat(jnp.asarray(direction, dtype), 1), {k: flat(v, 0) for k, v in p.items()},
+            flat(jnp.asarray(t, dtype), 0), flat(guess.astype(dtype), 1))
+    up, back = _holding_batch(model, friction, options, *args)
+    r = lambda x: x.reshape(shape + x.shape[1:])  # noqa: E731
+    zero = r(jnp.zeros_like(uf))
+    res = [_result(model, r(args[3]), r(uf), zero, zero, jax.tree_util.tree_map(r, out)) for out in (up, back)]
+    return Holding(*res, jnp.all((res[1].tau <= 0.0) & (res[0].tau >= 0.0), axis=-1))

@@ -28,7 +28,7 @@ from .joints import GROUND, Actuator, Prismatic, Revolute, Slot, joint_name
 from .model import Axial, Model, Moment, PointForce, angle_of, point_of
 from .virtual_power import LoadedState
 
-__all__ = ["joint_reactions", "joint_axes"]
+__all__ = ["joint_reactions", "joint_axes", "reaction_system", "solve_reaction_system", "unpack_reactions"]
 
 
 def _cross(r, f):
@@ -235,26 +235,30 @@ def _solve(sys_: _System, n: int, ok, dtype):
     return jnp.where(ok, jnp.stack([x[j] for j in range(n)]), jnp.nan)
 
 
-def joint_reactions(model: Model, st: LoadedState):
-    """Every joint's reaction and every drive's effort at one solved state.
-
-    **Arguments**: `model` with ``joints``; `st` the ``virtual_power.LoadedState`` of the
-    sample (inertia left out where it was built quasi-static).
-
-    **Returns** ``(efforts (dof,), forces, moments)``: `efforts` the drive torque (N m) or
-    force (N) on each input, in its positive sense; `forces` ``{joint: F}`` the force (N,
-    complex ``Fx + i Fy``, global) that the joint's first body exerts on its second (a
-    slot's or a guide's normal force as a vector; an actuator's push on its second body);
-    `moments` ``{joint: M}`` (N m, CCW on the second body) for prismatic joints.  NaN where
-    the position failed.
-    """
-    lay = model.layout
-    dtype = st.q.dtype
+def reaction_system(model: Model, st: LoadedState):
+    """The per-body Newton-Euler system at one state, written but not solved: ``(system,
+    geometry)``.  `system` holds the matrix entries ``system.a[(row, col)]`` and right-hand
+    side ``system.rhs[row]`` (three rows per body: x, y force and moment balance); its
+    ``applied(body, force=, at=, moment=)`` writes a further known load into ``rhs`` (how
+    joint friction enters, ``dynamics.friction``).  `geometry` ``{joint: (e, n)}`` the
+    unit vectors ``joint_reactions`` unpacks the unknowns with."""
     sys_ = _System(model, st)
     geometry = _write_joints(sys_, model, st)
     _write_loads(sys_, model, st)
-    x = _solve(sys_, lay.size, st.ok, dtype)
-    efforts = jnp.stack([x[c] for c in lay.efforts]) if lay.efforts else jnp.zeros((0,), dtype)
+    return sys_, geometry
+
+
+def solve_reaction_system(model: Model, sys_, st: LoadedState):
+    """The unknowns ``x (n,)`` of a ``reaction_system`` (``x (n, k)`` where every entry of
+    ``sys_.rhs`` is a ``(k,)`` vector: k right-hand sides in one elimination); NaN where the
+    position failed."""
+    return _solve(sys_, model.layout.size, st.ok, st.q.dtype)
+
+
+def unpack_reactions(model: Model, x, geometry):
+    """``(efforts, forces, moments)`` of ``joint_reactions`` from the solved unknowns `x`."""
+    lay = model.layout
+    efforts = jnp.stack([x[c] for c in lay.efforts]) if lay.efforts else jnp.zeros((0,), x.dtype)
     forces, moments = {}, {}
     mech = model.mechanism
     for j in model.joints:
@@ -270,3 +274,21 @@ def joint_reactions(model: Model, st: LoadedState):
             if isinstance(j, Prismatic):
                 moments[name] = x[cols[1]]
     return efforts, forces, moments
+
+
+def joint_reactions(model: Model, st: LoadedState):
+    """Every joint's reaction and every drive's effort at one solved state.
+
+    **Arguments**: `model` with ``joints``; `st` the ``virtual_power.LoadedState`` of the
+    sample (inertia left out where it was built quasi-static).
+
+    **Returns** ``(efforts (dof,), forces, moments)``: `efforts` the drive torque (N m) or
+    force (N) on each input, in its positive sense; `forces` ``{joint: F}`` the force (N,
+    complex ``Fx + i Fy``, global) that the joint's first body exerts on its second (a
+    slot's or a guide's normal force as a vector; an actuator's push on its second body);
+    `moments` ``{joint: M}`` (N m, CCW on the second body) for prismatic joints.  NaN where
+    the position failed.
+    """
+    sys_, geometry = reaction_system(model, st)
+    x = solve_reaction_system(model, sys_, st)
+    return unpack_reactions(model, x, geometry)

@@ -18,6 +18,7 @@ from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..names import closest, did_you_mean, near_hint
 from ..continuation import solve_stroke
 from ..options import SolverOptions
+from .friction import linkage_holding, read_friction
 from .elements import DISSIPATING, STORING, drawing_values, load_name, read_elements
 from .mass import derived_shapes, link_mass_properties
 from .terms import show
@@ -75,6 +76,9 @@ class Linkage:
       `rotary_dampers` ``{name: {"at": pin or "links": (a, b), "c": N m s/rad}}``: springs
       and dampers, loads with parameters of their own (``k_<name>``...: see
       ``jaxmech.linkage.elements`` and ``docs/springs_and_dampers.md``).
+    - `friction` ``{"all" or joint: {"mu": -, "radius": m, "damping": ...}}``: Coulomb
+      friction and viscous damping at pins, sliders and slots (``mu_<key>``, ``rpin_<key>``,
+      ``cv_<key>``: ``jaxmech.linkage.friction``); ``holding`` gives statics with it.
     - `loads`, `params`: loads of your own (``PointForce``, ``Moment``, ``Axial`` with
       ``body=``) and the values of the parameters they use.
     - `name`: for messages and files.
@@ -90,7 +94,8 @@ class Linkage:
                  inertia: Mapping | None = None, centre: Mapping | None = None, gravity=None,
                  forces: Mapping | None = None, moments: Mapping | None = None, springs: Mapping | None = None,
                  torsion_springs: Mapping | None = None, gas_springs: Mapping | None = None, dampers: Mapping | None = None,
-                 rotary_dampers: Mapping | None = None, loads: Sequence = (), params: Mapping | None = None, name: str = "linkage"):
+                 rotary_dampers: Mapping | None = None, loads: Sequence = (), params: Mapping | None = None, name: str = "linkage",
+                 friction: Mapping | None = None):
         self.name = str(name)
         if not isinstance(points, Mapping) or not points:
             raise ValueError(f"{self.name}: points must be a mapping {{name: (x, y)}}")
@@ -136,6 +141,8 @@ class Linkage:
             text = str(err)
             raise ValueError(f"{self.name}: {text.removeprefix('linkage: ')}") from None
         self._values = self._drawing_values()
+        self.friction, values = read_friction(self.name, self.model, friction, self._values)
+        self._values.update(values)
 
     # ----------------------------------------------------------------- reading the drawing
     def _read_links(self, links, ground):
@@ -432,7 +439,8 @@ class Linkage:
         point's position, velocity and acceleration (``points``), the drive's torque or force
         (``tau``) and every joint's reaction (``joints``; ``reaction(name)``)."""
         s, k = self._approach(self._samples(drive, t))
-        res = inverse_dynamics(self.model, s, p=self._p(p), guess=self._guess, quasi_static=quasi_static, options=options)
+        res = inverse_dynamics(self.model, s, p=self._p(p), guess=self._guess, quasi_static=quasi_static, options=options,
+                               friction=self.friction)
         return _drop(res, k)
 
     def statics(self, u, p: Mapping | None = None, *, t=0.0, options: SolverOptions = SolverOptions()) -> InverseDynamics:
@@ -442,6 +450,8 @@ class Linkage:
         u = self._stroke(u, "u")
         samples = check_samples(self.mechanism, Samples(u, 0.0, 0.0, np.full(u.shape[:1], float(t))))
         return self.inverse_dynamics(samples, p=p, quasi_static=True, options=options)
+
+    holding = linkage_holding
 
     def power(self, drive, t=None, p: Mapping | None = None, *, options: SolverOptions = SolverOptions()) -> PowerBalance:
         """Where the power goes along a drive law at times `t` (or ``Samples``): per sample
