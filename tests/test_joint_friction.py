@@ -112,12 +112,14 @@ def linear_system(mo):
     return m, rhs
 
 
-def friction_loads(x, sg):
+def friction_loads(x, sg, visc=None):
     """The friction loads in the nine body equations (force x, y, moment per body) for the
-    unknowns `x` and the signs `sg`: the friction circles' moments and the guide's force."""
+    unknowns `x` and the signs `sg`: the friction circles' moments and the guide's force;
+    `visc` ``{joint: c w}`` viscous terms added to them (N m at a pin, N in the guide)."""
+    visc = visc or {}
     mag = {"O": abs(x[0] + 1j * x[1]), "A": abs(x[2] + 1j * x[3]), "B": abs(x[4] + 1j * x[5])}
-    mom = {k: -MU[k] * RPIN[k] * mag[k] * sg[k] for k in mag}  # on each pin's second body
-    f_guide = -MU["guide"] * abs(x[6]) * sg["guide"]  # along +x on the block, at B = its centre
+    mom = {k: -MU[k] * RPIN[k] * mag[k] * sg[k] - visc.get(k, 0.0) for k in mag}  # on each pin's second body
+    f_guide = -MU["guide"] * abs(x[6]) * sg["guide"] - visc.get("guide", 0.0)  # along +x on the block, at B
     out = np.zeros(9)
     out[2] = mom["O"] - mom["A"]
     out[5] = mom["A"] - mom["B"]
@@ -126,10 +128,10 @@ def friction_loads(x, sg):
     return out
 
 
-def solve_with_friction(m, rhs, sg):
+def solve_with_friction(m, rhs, sg, visc=None):
     """``m x + friction(x) = rhs`` by Newton's method (finite-difference Jacobian), from the frictionless ``x``."""
     x = np.linalg.solve(m, rhs)
-    f = lambda y: m @ y + friction_loads(y, sg) - rhs  # noqa: E731
+    f = lambda y: m @ y + friction_loads(y, sg, visc) - rhs  # noqa: E731
     for _ in range(30):
         r = f(x)
         if np.max(np.abs(r)) <= 1e-14 * np.max(np.abs(rhs)):
@@ -185,6 +187,25 @@ def test_slider_crank_with_friction_everywhere_against_newton_euler():
     # the jump across a reversal: the friction torque changes sign between neighbouring samples
     k = int(np.argmin(np.abs(T - np.pi / 4)))
     assert extra[k - 1] * extra[k + 1] < 0 and abs(extra[k]) < 1e-9 * np.max(np.abs(extra))
+
+
+def test_viscous_joint_damping_with_friction_against_newton_euler():
+    """Damping ``c w`` at pin A (N m s/rad) and in the guide (N s/m) on top of the Coulomb terms."""
+    c_pin, c_guide = 0.8, 40.0
+    lk = linkage(friction={**FRICTION, "A": {**FRICTION["A"], "damping": "0.8 N m s/rad"}, "block_B": {"mu": MU["guide"], "damping": c_guide}})
+    assert lk.params["cv_A"] == c_pin and lk.params["cv_block_B"] == c_guide
+    res = lk.inverse_dynamics(samples())
+    motions = [motion_at(*drive(t)) for t in T]
+    visc = [{"A": c_pin * speeds(mo)["A"], "guide": c_guide * speeds(mo)["guide"]} for mo in motions]
+    xs = np.array([solve_with_friction(*linear_system(mo), sg, v) for mo, sg, v in zip(motions, regularised_signs(motions), visc)])
+    tau = xs[:, 8]
+    np.testing.assert_allclose(np.asarray(res.tau[:, 0]), tau, rtol=0, atol=TOL * np.max(np.abs(tau)))
+    for joint, link, col in (("O", "crank", 0), ("A", "rod", 2), ("B", "block_B", 4)):
+        want = xs[:, col] + 1j * xs[:, col + 1]
+        np.testing.assert_allclose(np.asarray(res.force_on(link, joint)), want, rtol=0, atol=TOL * np.max(np.abs(want)))
+    # the damping takes part: without it the torque differs by more than the tolerance
+    plain = lk.inverse_dynamics(samples(), p={"cv_A": 0.0, "cv_block_B": 0.0})
+    assert np.max(np.abs(np.asarray(plain.tau[:, 0]) - tau)) > 1e-3 * np.max(np.abs(tau))
 
 
 def test_friction_dissipation_is_the_drives_extra_power():
