@@ -304,3 +304,9 @@ def test_bad_friction_is_refused_naming_the_fix(friction, words):
     with pytest.raises(ValueError, match=None) as err:
         linkage(friction=friction)
     assert words in str(err.value)
+
+
+def test_a_scene_of_a_linkage_with_friction_is_refused_not_left_without_it():
+    with pytest.raises(ValueError, match="scenes .* do not take joint friction yet"):
+        linkage(friction=FRICTION).scene()
+    linkage().scene()  # without friction, as before

@@ -18,7 +18,7 @@ from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..names import closest, did_you_mean, near_hint
 from ..continuation import solve_stroke
 from ..options import SolverOptions
-from .friction import linkage_holding, read_friction
+from .friction import linkage_holding, no_friction_in_scenes, read_friction
 from .elements import DISSIPATING, STORING, drawing_values, load_name, read_elements
 from .mass import derived_shapes, link_mass_properties
 from .terms import show
@@ -488,7 +488,7 @@ class Linkage:
         or m/s); the table holds every coordinate, the drive's effort and every joint's
         reaction."""
         from ..scenes.linkage_scene import linkage_scene
-
+        no_friction_in_scenes(self)  # a scene's programs have no joint friction yet: refused, not ignored
         return linkage_scene(self, stroke, speed, summary)
 
 
