@@ -41,6 +41,8 @@ def test_best_designs_picks_converged_rows_within_the_filter_least_rank_first():
     assert list(got["row"]) == [5, 3] and list(got["a"]) == [5.0, 3.0]
     with pytest.raises(ValueError, match="no column"):
         best_designs(table, ["b"])
+    with pytest.raises(ValueError, match="best must be at least 1"):
+        best_designs(table, ["a"], best=0)
     with pytest.raises(ValueError, match="no design converged"):
         best_designs(table, ["a"], where={"q": (2.0, None)})
 

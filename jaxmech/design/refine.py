@@ -57,7 +57,7 @@ def _limit_rows(scene, limits: Mapping) -> list:
     """``[(fn, low, high)]`` of ``limits = {name: (what, low, high)}`` (None: no bound)."""
     out = []
     for name, spec in (limits or {}).items():
-        if not (isinstance(spec, tuple) and len(spec) == 3):
+        if not (isinstance(spec, (tuple, list)) and len(spec) == 3):
             raise ValueError(f"limits[{name!r}]: give (column or fn(columns, p), low, high) with None for an open side, got {spec!r}")
         what, low, high = spec
         if low is None and high is None:
@@ -166,6 +166,8 @@ def best_designs(designs, names, *, best: int = 256, rank: str | None = None, wh
 
 
 def _pick(table: dict, names: tuple, best: int, rank, where) -> dict:
+    if int(best) < 1:
+        raise ValueError(f"best_designs: best must be at least 1 (how many designs to take), got {best}")
     missing = [k for k in (*names, *(where or {}), *([rank] if rank else [])) if k not in table]
     if missing:
         raise ValueError(f"best_designs: the designs have no column(s) {missing}; their columns are: {', '.join(table)}")
