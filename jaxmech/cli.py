@@ -95,11 +95,11 @@ def _scene(name):
 
 
 def _run(source: str, scene, points, overrides):
-    from .scenes import run_scene
+    from .scenes.linkage_scene import run_file_scene  # run_scene, or a file's rocking or sampled stroke
 
     overrides = values.overrides(scene, overrides)
     with _mistakes_of(source):
-        return run_scene(scene, points=points, **overrides)
+        return run_file_scene(scene, points, **overrides)
 
 
 def write_csv(table: dict, path: Path) -> None:
@@ -115,14 +115,21 @@ def write_csv(table: dict, path: Path) -> None:
             w.writerow([int(v) if np.issubdtype(np.asarray(v).dtype, np.integer) else repr(float(v)) for v in row])
 
 
-def _write_run(result, outdir: Path, plots: str = "all") -> list[Path]:
+def _write_run(result, outdir: Path, plots: str = "all", point_kinematics: bool = False) -> list[Path]:
     """CSV and the plots (``--plots``: ``all``, ``summary``, ``none``) of one run into
-    ``outdir``; returns the paths written."""
+    ``outdir``; returns the paths written.  `point_kinematics`: every named point's
+    position, velocity and acceleration in the CSV too, before its status column."""
     from .plot import save_default_plots
 
     name = result.scene.name
     csv_path = outdir / f"{name}.csv"
-    write_csv(result.table(), csv_path)
+    table = result.table()
+    if point_kinematics:
+        from .scenes.linkage_scene import point_columns
+
+        status = table.pop("status[-]")
+        table = {**table, **point_columns(result.motion), "status[-]": status}
+    write_csv(table, csv_path)
     if plots == "none":
         return [csv_path]
     if result.scene.plots is not None:  # a scene's own plots: all of them, or none
@@ -165,7 +172,7 @@ def _cmd_scenes(args) -> int:
 def _cmd_run(args) -> int:
     scene = _scene(args.scene)
     result = _run(args.scene, scene, args.points, args.overrides)
-    paths = _write_run(result, Path(args.out), args.plots)
+    paths = _write_run(result, Path(args.out), args.plots, args.point_kinematics)
     print(result.summary())
     for path in paths:
         print(f"wrote {path}")

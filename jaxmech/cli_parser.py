@@ -60,13 +60,16 @@ def _add_run(sub) -> None:
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     r.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable; 'jaxmech scenes SCENE' lists them")
-    r.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101)")
+    r.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over the stroke, ends included (default 101; over all cycles of a linkage file's rocking stroke; a sampled stroke has its own)")
     r.add_argument("--out", default="jaxmech-out", metavar="DIR",
                    help="output folder (default ./jaxmech-out; made if missing, inside a folder that exists)")
     r.add_argument("--plots", choices=PLOTS, default="all",
                    help="the PNG plots to write: all (default: coordinates, velocities, accelerations, outputs, transmission, "
                    "poses), summary (the poses, and the outputs or else the coordinates), none (the CSV and the summary only; "
                    "plots take seconds of CPU)")
+    r.add_argument("--point-kinematics", action="store_true",
+                   help="add every named point's position, velocity and acceleration to the CSV: x_P[m], y_P[m], vx_P[m/s], "
+                   "vy_P[m/s], ax_P[m/s^2], ay_P[m/s^2] (joints, traced points, centres of mass G_<link>)")
 
 
 def _add_animate(sub) -> None:

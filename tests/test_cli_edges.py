@@ -312,7 +312,7 @@ def test_did_you_mean_for_a_linkage_parameter():
 
 @pytest.mark.parametrize("text, says", [
     ('driver = "crank"\nponts = 1\n', "did you mean 'points'?"),
-    ('[points]\nO2 = [0, 0]\n[links]\n[stroke]\nspeeed = 1\n', "unknown [stroke] key(s) ['speeed']; it takes from, to, speed, summary; did you mean 'speed'?"),
+    ('[points]\nO2 = [0, 0]\n[links]\n[stroke]\nspeeed = 1\n', "unknown [stroke] key(s) ['speeed']; it takes from, to, speed, summary, law, cycles, period, samples; did you mean 'speed'?"),
 ])  # fmt: skip
 def test_did_you_mean_for_file_keys(text, says, tmp_path):
     (tmp_path / "k.toml").write_text(text)

@@ -5,7 +5,8 @@ The keys are ``Linkage``'s arguments (``points``, ``links``, ``ground``, ``drive
 ``forces``, ``moments``, the springs and dampers ``springs``, ``torsion_springs``,
 ``gas_springs``, ``dampers``, ``rotary_dampers``, ``name``) plus an optional ``[stroke]``
 table for the command line: ``from``, ``to`` (the driven input's range, SI or with a unit:
-``"0deg"``), ``speed`` (rad/s or m/s) and ``summary``.  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
+``"0deg"``), ``speed`` (rad/s or m/s), ``summary``, and for a reversing or given drive
+``law = "rock"`` with ``cycles`` and ``period``, or ``samples`` (``linkage.stroke_file``).  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
 """
 
 from __future__ import annotations
@@ -18,12 +19,12 @@ from pathlib import Path
 from ..names import near_hint
 from .elements import ARGUMENTS
 from .spec import Linkage
+from .stroke_file import STROKE_KEYS
 
 __all__ = ["read_linkage_file", "load_linkage", "LINKAGE_KEYS"]
 
 LINKAGE_KEYS = ("name", "points", "links", "ground", "driver", "sliders", "slots", "actuators", "mass", "inertia",
                 "centre", "gravity", "forces", "moments", *ARGUMENTS)
-STROKE_KEYS = ("from", "to", "speed", "summary")
 
 
 def _toml(text: str) -> dict:

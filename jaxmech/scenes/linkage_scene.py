@@ -21,11 +21,12 @@ from ..dynamics.reactions import joint_reactions
 from ..dynamics.virtual_power import driving_effort, loaded_state
 from ..linkage.files import read_linkage_file
 from ..linkage.spec import Linkage
-from ..units import to_si
-from .base import Scene
+from ..linkage.stroke_file import FileStroke, read_stroke, stroke_samples
+from ..status import Status, status_counts
+from .base import Scene, SceneResult, run_scene
 from .outputs import Outputs
 
-__all__ = ["linkage_scene", "scene_from_file", "FileScene", "PARAMETER_UNITS"]
+__all__ = ["linkage_scene", "scene_from_file", "FileScene", "run_file_scene", "point_columns", "PARAMETER_UNITS"]
 
 #: SI unit of a linkage parameter by its prefix.
 PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", "m_": "kg", "J_": "kg m^2",
@@ -149,9 +150,14 @@ class FileScene(Scene):
     """The ``Scene`` of a linkage file, keyed by what it was built from: `content` is a
     SHA-256 of the file's bytes, its name, the stroke, the speed and the stroke start's
     coordinates, so that the stored programs of one file serve every later process that
-    reads the same file (a registry scene is keyed by its name instead)."""
+    reads the same file (a registry scene is keyed by its name instead).  `linkage` is the
+    file's ``Linkage`` and `drive` its ``[stroke]`` table read (``linkage.stroke_file``):
+    ``run_file_scene`` follows a rocking or sampled stroke, the scene's own stroke (what
+    sweeps, animations and exports run) is the sweep from its first value to its farthest."""
 
     content: str = ""
+    linkage: Linkage | None = None
+    drive: FileStroke | None = None
 
     @property
     def program_key(self) -> str | None:
@@ -174,16 +180,50 @@ def _content_key(data: bytes, scene: Scene) -> str:
 def scene_from_file(path) -> FileScene:
     """The scene of a linkage file (TOML or JSON; its ``[stroke]`` table sets the stroke),
     keyed by the file's content for the store of compiled programs (``FileScene``)."""
-    data = Path(path).read_bytes()
-    lk, stroke = read_linkage_file(path)
+    path = Path(path)
+    data = path.read_bytes()
+    lk, table = read_linkage_file(path)
     name = lk.mechanism.inputs[0] if lk.mechanism.dof == 1 else ""
-    unit = "m" if name in lk.mechanism.lengths else "rad"
-    rng = None
-    if "from" in stroke or "to" in stroke:
-        if not ("from" in stroke and "to" in stroke):
-            raise ValueError(f"{lk.name}: [stroke] needs both from and to")
-        rng = tuple(to_si(str(stroke[k]), unit) for k in ("from", "to"))
-    speed = to_si(str(stroke.get("speed", 1.0)), unit + "/s")
-    scene = linkage_scene(lk, rng, speed, stroke.get("summary"))
+    try:
+        drive = read_stroke(table, "m" if name in lk.mechanism.lengths else "rad", path.parent)
+    except ValueError as err:
+        raise ValueError(f"{path.name}: {err}") from None
+    scene = linkage_scene(lk, drive.range, drive.speed, drive.summary)
     fields = {f.name: getattr(scene, f.name) for f in dataclasses.fields(Scene)}
-    return FileScene(**fields, content=_content_key(data, scene))
+    return FileScene(**fields, content=_content_key(data, scene), linkage=lk, drive=drive)
+
+
+def run_file_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
+    """``run_scene``, except for a linkage file's rocking or sampled stroke: its linkage
+    along the stroke's samples (``Linkage.motion``; `points` samples over a rock's cycles, a
+    sampled stroke's own), with the scene's outputs (efforts, joint reactions) evaluated on
+    that motion.  ``ValueError`` for bad parameters or a stroke that cannot be assembled."""
+    samples = stroke_samples(scene.drive, points) if isinstance(scene, FileScene) and scene.drive else None
+    if samples is None:
+        return run_scene(scene, points, **overrides)
+    p = scene.params(**overrides)
+    mo = jax.tree_util.tree_map(np.asarray, scene.linkage.motion(samples, p=p))
+    status = mo.status
+    if np.any(status != Status.CONVERGED):
+        bad = np.flatnonzero(status != Status.CONVERGED)
+        uname = scene.mechanism.inputs[0]
+        raise ValueError(f"{scene.name}: its [stroke] cannot be assembled: {len(bad)} of {status.size} samples fail, "
+                         f"first at {uname} = {float(mo.u[bad[0], 0]):.6g} ({status_counts(status)}); "
+                         "change the stroke or the link lengths")
+    values = jax.jit(scene.outputs.fn)(p, mo)
+    outputs = {k: (np.asarray(values[k]), unit) for k, unit in scene.outputs.units.items()}
+    return SceneResult(scene=scene, params=p, motion=mo, outputs=outputs)
+
+
+def point_columns(motion) -> dict:
+    """Every named point's position, velocity and acceleration as table columns:
+    ``x_P[m]``, ``y_P[m]``, ``vx_P[m/s]``, ``vy_P[m/s]``, ``ax_P[m/s^2]``, ``ay_P[m/s^2]``
+    for each point ``P`` of ``motion.points`` (joints, tracers, centres of mass)."""
+    out = {}
+    for name, triple in motion.points.items():
+        col = _column(name)
+        for prefix, z, unit in zip(("", "v", "a"), triple, ("m", "m/s", "m/s^2")):
+            z = np.asarray(z)
+            out[f"{prefix}x_{col}[{unit}]"] = z.real
+            out[f"{prefix}y_{col}[{unit}]"] = z.imag
+    return out
