@@ -279,7 +279,7 @@ def test_zero_friction_is_bit_for_bit_no_friction():
     assert linkage(friction={}).friction is None and linkage(friction=None).params == linkage().params
 
 
-@pytest.mark.parametrize(("name", "value", "h"), [("mu_B", MU["B"], 1e-3), ("rpin_A", RPIN["A"], 1e-4)])
+@pytest.mark.parametrize(("name", "value", "h"), [("mu_B", MU["B"], 1e-3), ("rpin_A", RPIN["A"], 1e-4), ("len_A_B", L, 1e-4)])
 def test_gradient_of_the_peak_effort_in_friction_against_central_differences(name, value, h):
     lk = linkage(friction=FRICTION)
     s = samples()
@@ -310,3 +310,23 @@ def test_a_scene_of_a_linkage_with_friction_is_refused_not_left_without_it():
     with pytest.raises(ValueError, match="scenes .* do not take joint friction yet"):
         linkage(friction=FRICTION).scene()
     linkage().scene()  # without friction, as before
+
+
+def test_a_wedge_jammed_by_friction_has_no_driving_effort():
+    """A wedge at 40 degrees with ``mu = 1.5`` (friction angle 56.3 degrees): ``lambda + phi >
+    90`` degrees, no force drives it on (the friction's Newton has no root: ``MAX_STEPS``, NaN),
+    while holding it back takes ``W tan(lambda - phi)``; with ``mu = 0.5`` it moves at ``W tan(lambda + phi)``."""
+    lam, load = np.radians(40.0), 1000.0
+
+    def wedge(mu):
+        return jm.Linkage(points={"W": (0, 0), "P": (0.05, 0.02)}, links={}, driver="W",
+                          sliders={"W": {"angle": 0.0}, "P": {"angle": np.pi / 2}}, slots={"P": {"on": "block_W", "angle": np.pi - lam}},
+                          forces={"P": {"force": (0.0, -load), "on": "block_P"}}, friction={"P": {"mu": mu}}).holding([0.0, 0.01])
+
+    moving, jammed = wedge(0.5), wedge(1.5)
+    np.testing.assert_allclose(np.asarray(moving.up.tau[:, 0]), load * np.tan(lam + np.arctan(0.5)), rtol=1e-12)
+    assert np.all(np.asarray(moving.up.status) == jm.Status.CONVERGED)
+    assert np.all(np.asarray(jammed.up.status) == jm.Status.MAX_STEPS) and np.all(np.isnan(np.asarray(jammed.up.tau)))
+    np.testing.assert_allclose(np.asarray(jammed.back.tau[:, 0]), load * np.tan(lam - np.arctan(1.5)), rtol=1e-12)
+    # released, the jammed wedge stays put (it cannot go on, and must be pulled back): self-locking
+    assert np.all(np.asarray(jammed.self_locking)) and not np.any(np.asarray(moving.self_locking))

@@ -66,7 +66,8 @@ class InverseDynamics:
     - `joint_bodies`: a ``JointBodies`` (joint, first and second body, the driven slider's
       input index) per joint, in the order of ``Model.joints`` (static).
     - `status`: position-solve ``Status`` per sample (NaN results where not CONVERGED;
-      with joint friction, ``MAX_STEPS`` where the friction's Newton did not converge).
+      with joint friction, ``MAX_STEPS`` where the friction's Newton did not converge: a
+      linkage jammed by friction, which no effort drives that way).
     - `joint_friction`: with joint friction (``friction=``), ``{joint: f}`` each joint's
       friction load on its second body: a pin's moment (N m, CCW), a guide's or slot's
       force along its direction (N) (``dynamics.friction``); `tau` and `joints` include
@@ -374,7 +375,10 @@ class Holding(NamedTuple):
       way, friction helping the drive (the effort to lower a load, negative where it
       must be pulled down); ``back.tau <= up.tau`` with the frictionless effort between;
     - `self_locking` ``(...)``: True where zero lies between them for every input: with
-      the drive released the linkage stays put (friction alone holds the loads).
+      the drive released the linkage stays put (friction alone holds the loads).  A sense
+      that friction jams (no effort moves it that way: its ``status`` is ``MAX_STEPS``,
+      its efforts NaN) holds whatever the effort; a pose that does not assemble is not
+      self-locking.
     """
 
     up: InverseDynamics
@@ -399,7 +403,9 @@ def _holding_batch(model, friction, options, u, direction, p, t, guess):
 
     def at_rest(sg):  # the loads at rest (no rate), friction along the sense `sg`, no viscous term
         one = lambda *a: _sample(model, True, names, *a, friction=friction)  # noqa: E731
-        return _with_friction_status(jax.vmap(one)(p, t, u, zero, zero, q, d1, d2, sg, jnp.zeros_like(w)), q, status)
+        out = jax.vmap(one)(p, t, u, zero, zero, q, d1, d2, sg, jnp.zeros_like(w))
+        moves = out["friction_ok"]  # False: friction jams this sense (no effort moves it)
+        return _with_friction_status(out, q, status), moves
 
     return at_rest(signs), at_rest(-signs)
 
@@ -426,8 +432,12 @@ def holding(model: Model, u, p: Mapping, guess, friction: JointFriction, *, dire
     uf = flat(u.astype(dtype), 1)
     args = (uf, flat(jnp.asarray(direction, dtype), 1), {k: flat(v, 0) for k, v in p.items()},
             flat(jnp.asarray(t, dtype), 0), flat(guess.astype(dtype), 1))
-    up, back = _holding_batch(model, friction, options, *args)
+    (up, up_moves), (back, back_moves) = _holding_batch(model, friction, options, *args)
     r = lambda x: x.reshape(shape + x.shape[1:])  # noqa: E731
     zero = r(jnp.zeros_like(uf))
     res = [_result(model, r(args[3]), r(uf), zero, zero, jax.tree_util.tree_map(r, out)) for out in (up, back)]
-    return Holding(*res, jnp.all((res[1].tau <= 0.0) & (res[0].tau >= 0.0), axis=-1))
+    # zero between the two efforts; a sense that friction jams holds whatever the effort
+    up_holds = ~r(up_moves)[..., None] | (res[0].tau >= 0.0)
+    back_holds = ~r(back_moves)[..., None] | (res[1].tau <= 0.0)
+    assembled = jnp.all(jnp.isfinite(res[0].q), axis=-1)
+    return Holding(*res, assembled & jnp.all(up_holds & back_holds, axis=-1))
