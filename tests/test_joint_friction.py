@@ -11,12 +11,15 @@ numpy (no jaxmech code):
   ideal joints do no work, so ``(tau - tau_0) omega = sum mu r |F| |w|``);
 - statics with friction (``holding``): the efforts driving on and holding back against
   the same numpy equations at rest with the senses of motion given;
+- a pin in a circular slot of the frame with friction at both pins and in the slot
+  (quasi-static, back and forth): the crank torque, the pins' forces and the slot's normal force;
 - a screw jack unrolled as a wedge (a load on a vertical guide, its pin in a slot of a
   block sliding on a horizontal guide, the slot at the lead angle) with friction in the
   slot: ``ScrewJack``'s raise and lower torques and its self-locking;
 - friction zero (or absent): bit for bit the frictionless results;
-- the derivative of the peak crank torque in a friction coefficient and a pin radius
-  against central differences.
+- the derivative of the peak crank torque in a friction coefficient, a pin radius and the
+  rod's length against central differences;
+- a wedge jammed by friction (no driving effort, self-locking), bad input, scenes refused.
 """
 
 import jax
@@ -330,3 +333,86 @@ def test_a_wedge_jammed_by_friction_has_no_driving_effort():
     np.testing.assert_allclose(np.asarray(jammed.back.tau[:, 0]), load * np.tan(lam - np.arctan(1.5)), rtol=1e-12)
     # released, the jammed wedge stays put (it cannot go on, and must be pulled back): self-locking
     assert np.all(np.asarray(jammed.self_locking)) and not np.any(np.asarray(moving.self_locking))
+
+
+# --------------------------------------------------------------------------- circular slot
+# A crank O-A (driven) and an arm A-P whose pin P runs in a circular slot of the frame
+# (centre C, radius RHO): quasi-static, under gravity and a force at P, back and forth.
+CR, CL, RHO, CC = 0.10, 0.30, 0.12, 0.25 + 0.15j
+CM = {"crank": 0.9, "arm": 1.6}
+CF = 50.0 - 80.0j
+CMU = {"O": 0.12, "A": 0.10, "slot": 0.2}
+CRPIN = {"O": 0.006, "A": 0.005}
+
+
+def slot_pose(th):
+    """``(A, P)`` at crank angle `th` (the branch left of A -> C)."""
+    A = CR * np.exp(1j * th)
+    d = abs(CC - A)
+    a = (CL**2 - RHO**2 + d**2) / (2 * d)
+    return A, A + (a + 1j * np.sqrt(CL**2 - a**2)) * (CC - A) / d
+
+
+def slot_speeds(th, om):
+    """The arm's angular speed and the pin's speed along the slot's tangent ``i n``."""
+    A, P = slot_pose(th)
+    m = np.array([[(P - A).real, -(P - CC).real], [(P - A).imag, -(P - CC).imag]])
+    rhs = -A * om  # from i A om + i (P - A) phi' = i (P - C) psi'
+    w_arm, psi = np.linalg.solve(m, [rhs.real, rhs.imag])
+    return {"O": om, "A": w_arm - om, "slot": RHO * psi}
+
+
+def slot_newton_euler(th, sg):
+    """``x = (F_O, F_A, N, tau)``: F_O ground on crank, F_A crank on arm, N the slot's normal
+    force on the arm (out of the centre), tau on the crank; quasi-static, with friction."""
+    A, P = slot_pose(th)
+    g1, g2 = A / 2, (A + P) / 2
+    n = (P - CC) / abs(P - CC)
+    e = 1j * n
+    grav = -1j * G
+
+    def f(x):
+        FO, FA, N, tau = x[0] + 1j * x[1], x[2] + 1j * x[3], x[4], x[5]
+        mO = -CMU["O"] * CRPIN["O"] * abs(FO) * sg["O"]
+        mA = -CMU["A"] * CRPIN["A"] * abs(FA) * sg["A"]  # on the arm
+        fs = -CMU["slot"] * abs(N) * sg["slot"] * e
+        crank = FO - FA + CM["crank"] * grav
+        arm = FA + N * n + fs + CM["arm"] * grav + CF
+        return np.array([crank.real, crank.imag, cross(-g1, FO) + cross(A - g1, -FA) + tau + mO - mA,
+                         arm.real, arm.imag, cross(A - g2, FA) + cross(P - g2, N * n + fs + CF) + mA])
+
+    x = np.zeros(6)
+    for _ in range(40):
+        r = f(x)
+        if np.max(np.abs(r)) <= 1e-14 * 100:
+            break
+        jac = np.stack([(f(x + h) - f(x - h)) / 2e-7 for h in 1e-7 * np.eye(6)], axis=1)
+        x = x - np.linalg.solve(jac, r)
+    assert np.max(np.abs(f(x))) <= 1e-12 * 100
+    return x
+
+
+def test_pin_in_a_circular_slot_with_friction_against_newton_euler():
+    th0 = 0.8
+    A, P = slot_pose(th0)
+    lk = jm.Linkage(points={"O": (0, 0), "A": (A.real, A.imag), "P": (P.real, P.imag), "C": (CC.real, CC.imag)},
+                    links={"crank": "O A", "arm": "A P"}, ground="O C", driver="crank", slots={"P": {"on": "ground", "center": "C"}},
+                    mass=CM, gravity=G, forces={"P": {"force": (CF.real, CF.imag), "on": "arm"}},
+                    friction={"O": {"mu": CMU["O"], "radius": CRPIN["O"]}, "A": {"mu": CMU["A"], "radius": CRPIN["A"]},
+                              "P": {"mu": CMU["slot"]}, "width": WIDTH})
+    t = np.linspace(0.0, np.pi, 25)
+    th, om = th0 + 0.9 * np.sin(2 * t), 1.8 * np.cos(2 * t)
+    res = lk.inverse_dynamics(jm.Samples(th, om, np.zeros_like(t), t), quasi_static=True)
+    w = [slot_speeds(a, b) for a, b in zip(th, om)]
+    scale = {k: max(abs(x[k]) for x in w) for k in w[0]}
+    xs = np.array([slot_newton_euler(a, {k: np.tanh(x[k] / (WIDTH * scale[k])) for k in x}) for a, x in zip(th, w)])
+    tau = xs[:, 5]
+    np.testing.assert_allclose(np.asarray(res.tau[:, 0]), tau, rtol=0, atol=TOL * np.max(np.abs(tau)))
+    for joint, link, col in (("O", "crank", 0), ("A", "arm", 2)):
+        want = xs[:, col] + 1j * xs[:, col + 1]
+        np.testing.assert_allclose(np.asarray(res.force_on(link, joint)), want, rtol=0, atol=TOL * np.max(np.abs(want)))
+    np.testing.assert_allclose(np.asarray(res.normal_force("P in ground")), xs[:, 4], rtol=0, atol=TOL * np.max(np.abs(xs[:, 4])))
+    # friction takes part, the slot's most: without it the torque differs by more than the tolerance
+    bare = lk.inverse_dynamics(jm.Samples(th, om, np.zeros_like(t), t), p={"mu_O": 0.0, "mu_A": 0.0, "mu_P": 0.0}, quasi_static=True)
+    assert np.max(np.abs(np.asarray(res.tau[:, 0] - bare.tau[:, 0]))) > 1e-2 * np.max(np.abs(tau))
+    assert np.max(np.abs(np.asarray(res.joint_friction["P in ground"]))) > 1.0  # N
