@@ -173,7 +173,9 @@ jax.block_until_ready(jax.tree_util.tree_leaves(res))
 mark("run_scene_s", t0)
 """
 
-CLI_CASES = {"cli_run_fourbar": ["run", "fourbar"], "cli_run_flap_msd": ["run", "flap_msd"]}
+CLI_CASES = {"cli_run_fourbar": ["run", "fourbar"], "cli_run_flap_msd": ["run", "flap_msd"],
+             # the same four-bar as a linkage file (its programs stored under the file's content)
+             "cli_run_fourbar_file": ["run", "examples/linkages/fourbar.toml"]}
 
 FSOLVE_FOURBAR = """
 import numpy as np
@@ -284,6 +286,7 @@ def run_case(case: str, cache: Path, tree: Path | None = None, warm_repeats: int
 def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path, tree: Path | None = None, warm_repeats: int = 1) -> dict:
     out: dict = {"load_average_1min_before": os.getloadavg()[0]}
     exe = [sys.executable, "-m", "jaxmech.cli"]
+    out_dir.mkdir(parents=True, exist_ok=True)  # --out makes only the folder it names (b2d2b5b)
     for label in _labels(warm_repeats):
         wall, text, rc = _run(exe + argv + ["--out", str(out_dir / label)], _env(cache, None, tree), tree=tree)
         out[label] = {"process_s": wall, "returncode": rc, **({"error": text[-2000:]} if rc else {})}
