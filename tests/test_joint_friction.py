@@ -282,6 +282,15 @@ def test_zero_friction_is_bit_for_bit_no_friction():
     assert linkage(friction={}).friction is None and linkage(friction=None).params == linkage().params
 
 
+def test_statics_at_rest_with_friction_is_the_frictionless_effort():
+    """At rest there is no sense of motion: friction's sign is zero, so ``statics`` gives the
+    frictionless effort exactly (``holding`` gives the band around it)."""
+    th = np.linspace(0.4, 1.4, 4)
+    with_friction, bare = linkage(friction=FRICTION).statics(th), linkage().statics(th)
+    assert np.array_equal(np.asarray(with_friction.tau), np.asarray(bare.tau))
+    assert np.all(np.asarray(with_friction.joint_friction["B"]) == 0.0)
+
+
 @pytest.mark.parametrize(("name", "value", "h"), [("mu_B", MU["B"], 1e-3), ("rpin_A", RPIN["A"], 1e-4), ("len_A_B", L, 1e-4)])
 def test_gradient_of_the_peak_effort_in_friction_against_central_differences(name, value, h):
     lk = linkage(friction=FRICTION)
