@@ -464,6 +464,7 @@ class Linkage:
         out = power_balance(self.model, res, self._p(p), stored=names(STORING), dissipated=names(DISSIPATING))
         return out._replace(elements={e.name: out.elements[load_name(e)] for e in self.elements.specs})
 
+    from .forward import linkage_forward_dynamics as forward_dynamics  # (linkage/forward.py: spec.py is full)
     def mass_properties(self, p: Mapping | None = None) -> dict:
         """``{link: (mass (kg), centre of mass (complex, m, at the drawing's pose), inertia
         about it (kg m^2))}`` for the drawing, or for its parameters changed by `p` (the
