@@ -205,6 +205,8 @@ def fourbar(steps, h=5e-3, **kw):
 
 
 def test_a_new_duration_compiles_nothing_and_repeats_the_shorter_run():
+    x = jnp.ones(5)
+    assert _compiles(lambda: jax.jit(lambda v: 2.0 * v + 1.0)(x))[1] == 1  # the counter sees a compile
     short, _ = _compiles(lambda: fourbar(300))
     long, n = _compiles(lambda: fourbar(1000))
     assert n == 0
