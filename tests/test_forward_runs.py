@@ -214,6 +214,11 @@ def test_a_new_duration_compiles_nothing_and_repeats_the_shorter_run():
     for field in ("t", "u", "u_dot", "q", "q_dot", "u_ddot"):
         np.testing.assert_array_equal(np.asarray(getattr(long, field))[:301], np.asarray(getattr(short, field)), err_msg=field)
     assert long.u.shape == (1001, 1) and long.newton.shape == (1000,)
+    # the documented call that adds the effort and the reactions compiles nothing new either
+    short_dyn = short.dynamics(FB_MODEL, FB_FREE)
+    long_dyn, n = _compiles(lambda: long.dynamics(FB_MODEL, FB_FREE))
+    assert n == 0
+    np.testing.assert_array_equal(np.asarray(long_dyn.tau)[:301], np.asarray(short_dyn.tau))
 
 
 def test_an_oversized_step_names_the_step_and_close_iters():

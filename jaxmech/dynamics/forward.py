@@ -159,9 +159,12 @@ def gathered(run: ChunkedRun, dof: int, n_motor: int, t, h, diagnosis: Mapping) 
     motor's current and the actuators' states, at times `t`; `diagnosis`: the stop's
     fields (``closable``, ``cond``, ``close_iters``, ``newton_max``)."""
     ys = run.ys
-    return Trajectory(t=t, u=ys[:, :dof], u_dot=ys[:, dof:2 * dof], current=ys[:, 2 * dof:2 * dof + n_motor], q=run.qs,
-                      status=run.carry.status, t_stop=run.carry.t_stop, newton=run.newton, states=ys[:, 2 * dof:],
-                      u_ddot=run.rates[:, dof:2 * dof], q_dot=run.q_dot, h=h, **diagnosis)
+    # host rows (run_chunks) back to device arrays by device_put: a copy (jnp.asarray would
+    # compile a staging program for each new length)
+    put = lambda x: jax.device_put(x) if isinstance(x, np.ndarray) else x  # noqa: E731
+    return Trajectory(t=put(t), u=put(ys[:, :dof]), u_dot=put(ys[:, dof:2 * dof]), current=put(ys[:, 2 * dof:2 * dof + n_motor]),
+                      q=put(run.qs), status=run.carry.status, t_stop=run.carry.t_stop, newton=put(run.newton),
+                      states=put(ys[:, 2 * dof:]), u_ddot=put(run.rates[:, dof:2 * dof]), q_dot=put(run.q_dot), h=h, **diagnosis)
 
 
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",

@@ -48,10 +48,15 @@ def trajectory_dynamics(model: Model, tr, p: Mapping, *, options: SolverOptions 
         raise ValueError(f"{model.mechanism.name}: trajectory_dynamics needs the run's parameters p; missing {missing}")
     pm = {k: p[k] for k in model.parameters}
     n = tr.t.shape[0]
+    # cut on the host where nothing is traced: slicing a new length on the device would
+    # compile small programs for each new duration
+    if not any(isinstance(x, jax.core.Tracer) for x in (tr.t, tr.u, tr.u_dot, tr.u_ddot, tr.q)):
+        tr = jax.tree_util.tree_map(np.asarray, tr)
     parts = []
     for start in range(0, n, BLOCK):
         blk = lambda x: _block(x, start, BLOCK)  # noqa: E731
         parts.append(inverse_dynamics_at(model, blk(tr.u), blk(tr.u_dot), blk(tr.u_ddot), pm, blk(tr.q), t=blk(tr.t),
                                          options=options))
-    xp = np if isinstance(tr.u, np.ndarray) else jnp
-    return jax.tree_util.tree_map(lambda *xs: xp.concatenate([np.asarray(x) if xp is np else x for x in xs])[:n], *parts)
+    if isinstance(tr.u, np.ndarray):
+        return jax.tree_util.tree_map(lambda *xs: jax.device_put(np.concatenate([np.asarray(x) for x in xs])[:n]), *parts)
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:n], *parts)
