@@ -179,6 +179,10 @@ def test_bad_arguments_are_named():
         LK.forward_dynamics(h=1e-3, steps=2, p={**P_MOTOR, "k_spring": 1.0}, motor=MOTOR)
     with pytest.raises(ValueError, match="closeiters"):
         LK.forward_dynamics(h=1e-3, steps=2, p=P_MOTOR, motor=MOTOR, closeiters=3)
+    rough = jm.Linkage(points={"O": (0, 0), "A": (0.2, 0)}, links={"arm": "O A"}, ground="O", driver="arm", mass={"arm": 1.0},
+                       friction={"all": {"mu": 0.1, "radius": 0.01}})
+    with pytest.raises(ValueError, match="no joint friction yet"):
+        rough.forward_dynamics(h=1e-3, steps=2, p=P_MOTOR, motor=MOTOR)
 
 
 def test_a_linkage_run_is_differentiable_in_a_spring_parameter():

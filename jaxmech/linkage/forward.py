@@ -58,8 +58,12 @@ def linkage_forward_dynamics(lk, *, h, steps: int, u0=None, u_dot0=0.0, p: Mappi
 
     **Returns** a ``Trajectory``, differentiable in `p` (``jax.grad``, ``jax.jacfwd``);
     ``Trajectory.dynamics(lk.model, p)`` adds the effort and every joint's reaction.
-    **Raises** ``ValueError`` for a parameter the linkage, the motor and the actuators do
-    not know, a missing motor parameter, or an unknown setting."""
+    **Raises** ``ValueError`` for a linkage with joint friction (not in forward dynamics
+    yet), a parameter the linkage, the motor and the actuators do not know, a missing motor
+    parameter, or an unknown setting."""
+    if getattr(lk, "friction", None) is not None:  # refused, not silently left out (as a scene does)
+        raise ValueError(f"{lk.name}: forward dynamics has no joint friction yet; build the linkage without friction= "
+                         "to run it (or use Linkage.inverse_dynamics with friction along a drive law)")
     given = dict(p or {})
     extra = actuator_parameters(motor, voltage, actuators)
     missing = [k for k in extra if k not in given]
