@@ -52,6 +52,13 @@ def _read(path):
 
 
 # ----------------------------------------------------------------------- Ctrl-C
+#: ``python -m jaxmech.cli ARGS`` with SIGINT's handler set first: a shell starts a background
+#: job (a CI script run with ``&``) with SIGINT ignored and its children inherit that, so a
+#: Ctrl-C sent to the command under test, or ``_thread.interrupt_main``, would not reach it.
+CTRL_C_REACHES = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                  "sys.argv[0] = 'jaxmech'; runpy.run_module('jaxmech.cli', run_name='__main__', alter_sys=True)")
+
+
 def test_ctrl_c_during_a_sweep_is_one_line_and_the_rerun_resumes(tmp_path, capsys):
     """SIGINT once the first chunk is in the folder (chunks of 1000 designs x 101 points:
     a row group each, staged as soon as it is computed): one line on stderr naming the
@@ -62,7 +69,8 @@ def test_ctrl_c_during_a_sweep_is_one_line_and_the_rerun_resumes(tmp_path, capsy
     capsys.readouterr()
     out = tmp_path / "cut.parquet"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "jaxmech.cli", *sweep, "--out", str(out)], env=env,
+    # "-m jaxmech.cli" with SIGINT's default handler first (see CTRL_C_REACHES)
+    proc = subprocess.Popen([sys.executable, "-c", CTRL_C_REACHES, *sweep, "--out", str(out)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 300
     while proc.poll() is None and time.monotonic() < deadline and not any(out.glob(".stage-*")):
@@ -99,7 +107,11 @@ def test_ctrl_c_in_a_garbage_collector_callback_still_stops(monkeypatch, capsys)
             time.sleep(0.001)
 
     monkeypatch.setattr(cli, "_setup_jax", setup)
-    assert main(["scenes"]) == 130
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # not ignored (see CTRL_C_REACHES)
+    try:
+        assert main(["scenes"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, previous)
     out, err = capsys.readouterr()
     one_line(err, "jaxmech: interrupted: scenes")
     assert out == ""  # the scenes were not listed: it stopped
