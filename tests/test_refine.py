@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
-from jaxmech.design import best_designs, refine, scene_problem  # noqa: E402
+from jaxmech.design import best_designs, refine, scene_figure, scene_problem  # noqa: E402
 from jaxmech.sweep import sweep_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,6 +87,20 @@ def test_refine_reaches_the_brute_force_optimum():
     slope = np.max(np.abs(np.diff(peak))) / (grid[1] - grid[0])
     assert value >= best_scan - slope * (grid[1] - grid[0])
     assert list(res.origin) == list(np.argsort(starts["peak"]))
+
+
+def test_the_effort_read_alone_equals_the_tables():
+    """A figure that reads only the effort gets it by virtual power along the motion's tangent
+    (no reactions traced); the table's comes from every body's Newton-Euler equations.  Two
+    formulas, one number."""
+    scene = fourbar().scene(speed=2.0)
+    table = sweep_scene(scene, table={"len_A_B": np.array([3.3])}, points=25, progress=False).columns[EFFORT][0]
+    peak = scene_figure(scene, lambda c, p: jnp.max(jnp.abs(c[EFFORT])), points=25, name="peak")
+    value, ok = peak({"len_A_B": 3.3})
+    assert bool(ok)
+    assert float(value) == pytest.approx(float(np.max(np.abs(table))), rel=1e-12)
+    last = scene_figure(scene, lambda c, p: c[EFFORT][-7], points=25, name="late")
+    assert float(last({"len_A_B": 3.3})[0]) == pytest.approx(float(table[-7]), rel=1e-12, abs=1e-12 * float(np.max(np.abs(table))))
 
 
 def test_design_workflow_page_shows_the_example():
