@@ -77,6 +77,12 @@ BOUNDS = {"b": (2.0, 4.8), "c": (2.0, 4.8)}
 STARTS = {"b": np.array([3.0, 3.6, 2.8, 2.0]), "c": np.array([2.6, 3.2, 2.2, 4.7])}
 
 
+#: Whether ``solved`` already ran in this process: under pytest-xdist a worker can run this
+#: module's tests in two batches, setting the module's fixtures up twice; the second call
+#: is then served by the program this process holds (neither stored nor loaded again).
+_SOLVED_BEFORE: list = []
+
+
 @pytest.fixture(scope="module")
 def solved(problem):
     from jaxmech import stored
@@ -87,9 +93,12 @@ def solved(problem):
     jax.config.update("jax_enable_compilation_cache", False)
     try:
         before = stored.store_stats()
+        again = bool(_SOLVED_BEFORE)
+        _SOLVED_BEFORE.append(True)
         res = minimize_second_order(problem, STARTS, BOUNDS, peak_scale=1.0)
         stored.wait_for_stores()
-        return res, before, stored.store_stats()
+        after = stored.store_stats()
+        return res, before, {**after, "again": again}
     finally:
         jax.config.update("jax_enable_compilation_cache", was)
 
@@ -99,7 +108,10 @@ def test_every_start_converges_to_the_independent_optimum(problem, solved):
 
     res, before, after = solved
     if stored.store_dir() is not None:  # the program is stored (or was, by an earlier run)
-        assert after["stored"] + after["loaded"] == before["stored"] + before["loaded"] + 1
+        # once per process: compiled and stored, or loaded; a second setup of this module's
+        # fixtures in the same worker runs the program the process already holds
+        expected = 0 if after["again"] else 1
+        assert after["stored"] + after["loaded"] == before["stored"] + before["loaded"] + expected
     assert np.all(res.status == Status.CONVERGED), res.report()
     assert np.all(res.kkt <= 1e-8) and np.all(res.violation <= 1e-10)
     ref = minimize(stroke_state(problem), {k: v[:1] for k, v in STARTS.items()}, BOUNDS, method="SLSQP", maxiter=500, tol=1e-14)
