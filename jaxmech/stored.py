@@ -17,7 +17,9 @@ The store needs no JAX setting and changes none (its folder: ``cache.executables
 cache is the user's: where it is on and served a program (an executable JAX loaded from its
 own cache loses kernels when serialised again, jaxlib 0.10), that program is used but not
 stored; a listener of JAX's cache-hit events is registered for the length of such a
-compile only, and only while JAX's cache is on.
+compile only, and only while a folder for JAX's cache is set (JAX decides once per process
+whether its cache is used, so a later ``jax_enable_compilation_cache=False`` does not stop
+it serving programs: the listener does not trust that flag).
 
 A stored executable is used only where it is exactly what the jitted function would run:
 
@@ -70,8 +72,9 @@ from .cache import executables_dir
 __all__ = ["cached_call", "cached_chain", "cached_json", "calls_lapack", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
 
 # What ``cached_call`` did, per process: loaded (a stored executable was used), stored (one
-# was written), fallback (the normal path ran where a key existed but compiling failed).
-_STATS = {"loaded": 0, "stored": 0, "fallback": 0}
+# was written), served (compiled, but JAX's own cache served it, so it is not stored),
+# fallback (the normal path ran where a key existed but compiling failed).
+_STATS = {"loaded": 0, "stored": 0, "served": 0, "fallback": 0}
 # (folder, key) -> the compiled program that serves it in this process (None: use the jit path)
 _PROGRAMS: dict[tuple[str, str], object] = {}
 _OFF = {"0", "off", "false", "no"}
@@ -81,7 +84,8 @@ _FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_pro
 
 def store_stats() -> dict[str, int]:
     """Counts for this process: ``loaded`` (stored executables used), ``stored`` (written:
-    after ``wait_for_stores``, every one this process compiled), ``fallback``."""
+    after ``wait_for_stores``, every one this process compiled and may store), ``served``
+    (compiled programs that JAX's persistent cache served, used but not stored), ``fallback``."""
     return dict(_STATS)
 
 
@@ -322,8 +326,10 @@ def _count_hit(event: str, **_) -> None:
 @contextlib.contextmanager
 def _jax_cache_hits():
     """A function giving how many programs JAX's persistent cache served on this thread
-    since entry (0 while that cache is off: then no listener is registered)."""
-    if jax.config.jax_compilation_cache_dir is None or not jax.config.jax_enable_compilation_cache:
+    since entry (0 while no folder is set for that cache: then no listener is registered).
+    The enable flag is not read: JAX memoises at a process's first compile whether its cache
+    is used, and serves programs from it after the flag is turned off."""
+    if jax.config.jax_compilation_cache_dir is None:
         yield lambda: 0
         return
     with _LOCK:
@@ -351,7 +357,11 @@ def _compile_lowered(lowered):
     when JAX's persistent cache served it."""
     with _jax_cache_hits() as hits:
         compiled = lowered.compile()
-        return compiled, hits() == 0
+        served = hits() > 0
+    if served:
+        with _LOCK:
+            _STATS["served"] += 1
+    return compiled, not served
 
 
 def cached_call(fn, static: tuple, args: tuple):
