@@ -2,8 +2,8 @@
 result.
 
 The drive's power goes into kinetic energy, into potential energy (gravity and the loads
-that store it: springs), into the loads that dissipate it (dampers) and into the other loads
-(the mechanism's work on them: its output):
+that store it: springs), into the loads that dissipate it (dampers) and the joints' friction,
+and into the other loads (the mechanism's work on them: its output):
 
     P_in = sum tau_i u_dot_i = dT/dt + dV/dt + P_dissipated + P_loads
 
@@ -15,7 +15,11 @@ second-order path of ``virtual_power.loaded_state``) and the loads' values:
 - ``dV/dt = -sum m g . v_G`` (gravity) ``- P`` of every storing load;
 - ``P`` of a load: ``F . v_P`` (a ``PointForce``), ``M dangle/dt`` (a ``Moment``), ``-T
   dL/dt`` (an ``Axial``): the power it puts into the mechanism; a dissipating load's
-  ``-P`` is what it dissipates, any other load's ``-P`` what the mechanism delivers to it.
+  ``-P`` is what it dissipates, any other load's ``-P`` what the mechanism delivers to it;
+- a joint's friction (``dynamics.friction``; the result's ``joint_friction``, its load ``f``
+  on the joint's second body and ``-f`` on the first, at one point): ``-f w``, ``w`` the
+  joint's relative speed (``friction.joint_speeds``): what it dissipates
+  (``mu r |F| |w| + c w^2`` at a pin).
 
 ``tau`` comes from the balance of virtual power with the loop multipliers (or the
 joints' Newton-Euler system), not from these terms, so the returned residual ``P_in - dT/dt
@@ -32,6 +36,7 @@ import jax
 import jax.numpy as jnp
 
 from ..xla import jit
+from .friction import JointFriction, joint_speeds
 from .model import Axial, Model, Moment, PointForce, Potential, prepare_params
 from .virtual_power import loaded_state
 
@@ -54,11 +59,13 @@ class PowerBalance(NamedTuple):
     - `input`: the drive's power ``sum tau u_dot`` (positive: the drive puts energy in);
     - `kinetic`: ``dT/dt``, the rate of change of kinetic energy;
     - `potential`: ``dV/dt`` of gravity and the springs (positive: energy stored);
-    - `dissipated`: the power the dampers take out (never negative);
+    - `dissipated`: the power the dampers and the joints' friction take out (never negative);
     - `loads`: the power the mechanism delivers to its other loads (forces, moments, a
       user's own loads; negative where they drive it);
     - `residual`: ``input - kinetic - potential - dissipated - loads``: round-off;
-    - `elements`: ``{element: W}`` each spring's ``dV/dt`` and each damper's dissipation.
+    - `elements`: ``{element: W}`` each spring's ``dV/dt`` and each damper's dissipation;
+    - `joints`: ``{joint: W}`` each friction joint's dissipation ``-f w`` (its friction load
+      times its relative speed; positive: dissipating), counted in `dissipated`.
 
     NaN where the position failed.
     """
@@ -71,6 +78,7 @@ class PowerBalance(NamedTuple):
     loads: jax.Array
     residual: jax.Array
     elements: dict
+    joints: dict
 
     def work(self) -> dict:
         """Each field's energy over the stroke (J): the trapezoidal integral of its samples
@@ -110,10 +118,11 @@ def _load_powers(model: Model, st) -> list:
     return out
 
 
-def sample_power(model: Model, stored: tuple, dissipated: tuple, p, t, q, u, ud, udd, qd, qdd, tau) -> dict:
+def sample_power(model: Model, stored: tuple, dissipated: tuple, friction, p, t, q, u, ud, udd, qd, qdd, tau, jf) -> dict:
     """The power balance's terms at one sample (W): a dict of ``PowerBalance``'s fields but
     `t`.  `stored`, `dissipated`: the names of the loads that store and that dissipate
-    energy; `q`, `u` and their rates the sample's motion; `tau` the drive's effort."""
+    energy; `friction` the ``JointFriction`` (or None) and `jf` ``(k,)`` its joints' friction
+    loads; `q`, `u` and their rates the sample's motion; `tau` the drive's effort."""
     st = loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd)
     v_g, omega = st.rates[0], st.rates[1]
     a_g, alpha = st.accels[0], st.accels[1]
@@ -133,30 +142,54 @@ def sample_power(model: Model, stored: tuple, dissipated: tuple, p, t, q, u, ud,
             lost = lost - power
         else:
             delivered = delivered - power
+    joints = {}
+    if friction is not None:
+        w = joint_speeds(model, friction, q, u, p, qd, ud)
+        joints = {fj.joint: -jf[k] * w[k] for k, fj in enumerate(friction.joints)}
+        lost = lost + sum(joints.values())
     inp = jnp.sum(tau * ud)
     out = dict(input=inp, kinetic=kinetic, potential=potential, dissipated=lost, loads=delivered,
-               residual=inp - kinetic - potential - lost - delivered, elements=elements)
+               residual=inp - kinetic - potential - lost - delivered, elements=elements, joints=joints)
     return jax.tree_util.tree_map(lambda x: jnp.where(st.ok, x, jnp.nan), out)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2))
-def _powers(model, stored, dissipated, p, t, q, u, ud, udd, qd, qdd, tau):
-    return jax.vmap(lambda *a: sample_power(model, stored, dissipated, p, *a))(t, q, u, ud, udd, qd, qdd, tau)
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
+def _powers(model, stored, dissipated, friction, p, t, q, u, ud, udd, qd, qdd, tau, jf):
+    return jax.vmap(lambda *a: sample_power(model, stored, dissipated, friction, p, *a))(t, q, u, ud, udd, qd, qdd, tau, jf)
 
 
-def power_balance(model: Model, result, p: Mapping, *, stored=(), dissipated=()) -> PowerBalance:
+def _friction_loads(result, friction: JointFriction | None):
+    """The result's joint friction loads ``(N, k)`` in the order of `friction`'s joints;
+    ``ValueError`` where the result and `friction` do not go together (a balance that
+    would not close)."""
+    have = dict(result.joint_friction or {})
+    if friction is None:
+        if have:
+            raise ValueError("power_balance: the result has joint friction; give friction= (the JointFriction it was computed with)")
+        return jnp.zeros((result.q.shape[0], 0), result.q.dtype)
+    missing = [fj.joint for fj in friction.joints if fj.joint not in have]
+    if missing:
+        raise ValueError(f"power_balance: the result has no joint friction at {missing}; "
+                         "give a result of inverse_dynamics(..., friction=) with the same friction")
+    return jnp.stack([jnp.asarray(have[fj.joint], result.q.dtype) for fj in friction.joints], axis=-1)
+
+
+def power_balance(model: Model, result, p: Mapping, *, stored=(), dissipated=(), friction: JointFriction | None = None) -> PowerBalance:
     """The power balance at every sample of an inverse-dynamics `result` (an
     ``InverseDynamics`` along a drive, with inertia) of `model` for its parameters `p`.
 
     - `stored`: the names of the loads that store energy (springs: their power counts in
       ``potential``); `dissipated`: those that dissipate it (dampers).  Every other load is
       an output (``loads``).  A ``Linkage`` says which of its elements are which.
+    - `friction`: the ``JointFriction`` the result was computed with (its ``joint_friction``
+      loads): each joint's dissipation in ``joints`` and in ``dissipated``.
 
     **Returns** a ``PowerBalance`` (W per sample; its ``residual`` is round-off).
 
     **Raises** ``ValueError`` for a model with a ``Potential`` load (its energy has no
-    place of application here: give it as a load with a point or an angle), or a result
-    without velocities (a statics result: no power)."""
+    place of application here: give it as a load with a point or an angle), a result
+    without velocities (a statics result: no power), or a result with joint friction
+    without `friction` (or the other way round)."""
     for ld in model.loads:
         if isinstance(ld, Potential):
             raise ValueError(f"power_balance: load {ld.name!r} is a Potential; give it as a PointForce, Moment or Axial")
@@ -166,8 +199,12 @@ def power_balance(model: Model, result, p: Mapping, *, stored=(), dissipated=())
     for name in (*stored, *dissipated):
         if name not in known:
             raise ValueError(f"power_balance: no load named {name!r}; the model's loads are {sorted(known)}")
+    jf = _friction_loads(result, friction)
     dtype = result.q.dtype
-    pj = prepare_params(model, p, dtype)
-    out = _powers(model, tuple(stored), tuple(dissipated), pj, jnp.asarray(result.t, dtype), result.q, result.u, result.u_dot,
-                  result.u_ddot, result.q_dot, result.q_ddot, result.tau)
+    if friction is not None:
+        friction.check(model)
+    extra = () if friction is None else tuple(n for n in friction.parameters if n not in model.parameters)
+    pj = prepare_params(model, p, dtype, extra)  # (the friction's values are in the result's loads already)
+    out = _powers(model, tuple(stored), tuple(dissipated), friction, pj, jnp.asarray(result.t, dtype), result.q, result.u,
+                  result.u_dot, result.u_ddot, result.q_dot, result.q_ddot, result.tau, jf)
     return PowerBalance(t=jnp.asarray(result.t, dtype), **out)

@@ -13,14 +13,14 @@ import numpy as np
 
 from ..dynamics.inverse import InverseDynamics, inverse_dynamics
 from ..dynamics.joints import joint_name
-from ..dynamics.power import PowerBalance, power_balance
 from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..names import closest, did_you_mean, near_hint
 from ..continuation import solve_stroke
 from ..options import SolverOptions
 from .friction import linkage_holding, no_friction_in_scenes, read_friction
-from .elements import DISSIPATING, STORING, drawing_values, load_name, read_elements
+from .elements import drawing_values, read_elements
 from .mass import derived_shapes, link_mass_properties
+from .power import linkage_power
 from .terms import show
 from .topology import GROUND, Built, Topology, build, link_joints
 from .values import read_names as _names
@@ -453,16 +453,7 @@ class Linkage:
 
     holding = linkage_holding
 
-    def power(self, drive, t=None, p: Mapping | None = None, *, options: SolverOptions = SolverOptions()) -> PowerBalance:
-        """Where the power goes along a drive law at times `t` (or ``Samples``): per sample
-        (W) the drive's input power, the rates of kinetic and potential energy (gravity and
-        springs), the dampers' dissipation, the power delivered to the other loads and the
-        balance's residual; ``.work()`` each over the samples' times and ``.efficiency`` the
-        stroke's (a ``Samples`` drive needs its times ``t`` for them; see ``dynamics.power``)."""
-        res = self.inverse_dynamics(drive, t, p, options=options)
-        names = lambda kinds: tuple(load_name(e) for e in self.elements.specs if e.kind in kinds)  # noqa: E731
-        out = power_balance(self.model, res, self._p(p), stored=names(STORING), dissipated=names(DISSIPATING))
-        return out._replace(elements={e.name: out.elements[load_name(e)] for e in self.elements.specs})
+    power = linkage_power  # (linkage/power.py: the dampers' and the joints' friction's dissipation)
 
     from .forward import linkage_forward_dynamics as forward_dynamics  # (linkage/forward.py: spec.py is full)
     def mass_properties(self, p: Mapping | None = None) -> dict:
