@@ -3,7 +3,7 @@
 The keys are ``Linkage``'s arguments (``points``, ``links``, ``ground``, ``driver``,
 ``sliders``, ``slots``, ``actuators``, ``mass``, ``inertia``, ``centre``, ``gravity``,
 ``forces``, ``moments``, the springs and dampers ``springs``, ``torsion_springs``,
-``gas_springs``, ``dampers``, ``rotary_dampers``, ``name``) plus an optional ``[stroke]``
+``gas_springs``, ``dampers``, ``rotary_dampers``, the joints' ``friction``, ``name``) plus an optional ``[stroke]``
 table for the command line: ``from``, ``to`` (the driven input's range, SI or with a unit:
 ``"0deg"``), ``speed`` (rad/s or m/s), ``summary``, and for a reversing or given drive
 ``law = "rock"`` with ``cycles`` and ``period``, or ``samples`` (``linkage.stroke_file``).  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
@@ -24,7 +24,7 @@ from .stroke_file import STROKE_KEYS
 __all__ = ["read_linkage_file", "load_linkage", "LINKAGE_KEYS"]
 
 LINKAGE_KEYS = ("name", "points", "links", "ground", "driver", "sliders", "slots", "actuators", "mass", "inertia",
-                "centre", "gravity", "forces", "moments", *ARGUMENTS)
+                "centre", "gravity", "forces", "moments", *ARGUMENTS, "friction")
 
 
 def _toml(text: str) -> dict:

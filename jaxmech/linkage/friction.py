@@ -24,7 +24,7 @@ from collections.abc import Mapping
 from ..dynamics.friction import FrictionJoint, JointFriction
 from ..dynamics.inverse import Holding, holding
 from ..dynamics.joints import Prismatic, Revolute, Slot, joint_name
-from ..names import did_you_mean
+from ..names import did_you_mean, near_hint
 from .values import read_number
 
 __all__ = ["read_friction", "friction_key", "linkage_holding", "no_friction_in_scenes"]
@@ -44,7 +44,8 @@ def _entry(lk_name: str, key: str, spec) -> dict:
         raise ValueError(f"{lk_name}: friction[{key!r}] must be a table like {{\"mu\": 0.1, \"radius\": \"5 mm\"}}, got {spec!r}")
     unknown = [k for k in spec if k not in FIELDS]
     if unknown:
-        raise ValueError(f"{lk_name}: friction[{key!r}]: unknown key(s) {unknown}; the keys are {list(FIELDS)}")
+        raise ValueError(f"{lk_name}: friction[{key!r}]: unknown key(s) {unknown}; the keys are {list(FIELDS)}"
+                         f"{near_hint(unknown, FIELDS)}")
     return dict(spec)
 
 
@@ -68,6 +69,9 @@ def _values(lk_name: str, key: str, j, spec: dict) -> dict:
 def read_friction(lk_name: str, model, friction: Mapping | None, taken) -> tuple:
     """``(JointFriction or None, {parameter: value})`` from ``Linkage(friction=...)`` (module
     docstring); `taken` the linkage's other parameter names (a clash is refused)."""
+    if not isinstance(friction, Mapping) and friction is not None:
+        raise ValueError(f"{lk_name}: friction must be a table like {{\"all\": {{\"mu\": 0.1, \"radius\": \"5 mm\"}}}}, "
+                         f"got {friction!r}")
     if not friction:
         return None, {}
     spec = dict(friction)
@@ -76,7 +80,8 @@ def read_friction(lk_name: str, model, friction: Mapping | None, taken) -> tuple
     by_name = {**{friction_key(j): j for j in joints}, **{joint_name(j): j for j in joints}}
     for k in spec:
         if k != "all" and k not in by_name:
-            raise ValueError(f"{lk_name}: friction: {k!r} is not a pin, slider or slot; {did_you_mean(k, list(by_name), 'joints')}")
+            raise ValueError(f"{lk_name}: friction: {k!r} is not a pin, slider or slot (nor 'all' or 'width'); "
+                             f"{did_you_mean(k, ['all', 'width', *by_name], 'the keys')}")
     common = _entry(lk_name, "all", spec.get("all", {}))
     own = {by_name[k]: (k, _entry(lk_name, k, v)) for k, v in spec.items() if k != "all"}
     entries, values = [], {}
