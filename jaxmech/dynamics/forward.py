@@ -22,7 +22,9 @@ from ..actuators import DCMotor, parameter_names
 from ..options import SolverOptions
 from ..positions import solve
 from ..status import Status
-from .forward_setup import StopCause, checked_arguments, initial_state, run_actuators, stop_message, stroke_bounds
+from .forward_setup import (StopCause, checked_arguments, friction_speeds, initial_state, run_actuators, stop_message,
+                            stroke_bounds)
+from .friction import friction_parameters
 from .forward_steps import (METHODS, Chunk, Integrator, Run, StepCarry, integrate, integrate_chunk, newton_tolerance, rhs,
                             stage_residual, coordinate_rates)
 from .model import Model, mechanism_params, prepare_params
@@ -170,7 +172,7 @@ def gathered(run: ChunkedRun, dof: int, n_motor: int, t, h, diagnosis: Mapping) 
 def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: int, t0=0.0, method: str = "radau5",
                      motor: DCMotor | None = None, voltage=None, current0=0.0, motor_input: str | None = None,
                      actuators: Mapping | None = None, load: Callable | None = None, stroke=None, options: SolverOptions = SolverOptions(),
-                     newton_tol: float | None = None, newton_max: int = 12, close_iters: int = 5) -> Trajectory:
+                     newton_tol: float | None = None, newton_max: int = 12, close_iters: int = 5, friction=None, friction_speed=None) -> Trajectory:
     """Integrate the equations of motion in the inputs, with fixed steps (one design).
 
     ``M(u) u_ddot + h(u, u_dot, t) = tau_load + tau_motor`` where ``M`` is ``mass_matrix``
@@ -212,6 +214,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
       steps closing the loop at each stage from the step's start (the step must be small
       enough for them).
     - `options`: ``SolverOptions`` of the initial position solve and of every loop closure.
+    - `friction`, `friction_speed`: a ``JointFriction`` and its sign's speed scale ``W`` (``dynamics.forward_friction``).
 
     **Raises** ``ValueError`` naming the argument for another shape, before any tracing.
 
@@ -229,15 +232,14 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
         raise ValueError(f"steps must be at least 1, got {steps}")
     acts = run_actuators(mech, motor, voltage, motor_input, actuators)
     u0, ud0, guess = checked_arguments(mech, u0, u_dot0, guess, h, t0, stroke)
+    integ = Integrator(model, method, CHUNK, load, tuple(acts), int(close_iters), None if newton_tol is None else float(newton_tol),
+                       int(newton_max), options, friction, friction_speeds(friction, friction_speed))
     dtype = jnp.result_type(u0, ud0, guess, float)
-    pj = prepare_params(model, p, dtype, tuple(n for _, a in acts for n in parameter_names(a)))
+    pj = prepare_params(model, p, dtype, tuple(n for _, a in acts for n in parameter_names(a)) + friction_parameters(model, friction))
     y0 = initial_state(acts, motor is not None, u0, ud0, current0, pj, dtype)
-    # The jitted batch solve (compiled once per mechanism and options); a dict of scalars
-    # is a batch of shape ().
+    # The jitted batch solve (compiled once per mechanism and options); a dict of scalars is a batch of shape ().
     sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, mechanism_params(model, pj),
                 guess.astype(dtype), options=options)
-    integ = Integrator(model, method, CHUNK, load, tuple(acts), int(close_iters),
-                       None if newton_tol is None else float(newton_tol), int(newton_max), options)
     t0, h = jnp.asarray(t0, dtype), jnp.asarray(h, dtype)
     ok = sol.status == Status.CONVERGED
     init = StepCarry(y0, sol.q, jnp.where(ok, DynStatus.OK, DynStatus.POSITION).astype(jnp.int32), t0, ok)

@@ -22,6 +22,7 @@ from ..implicit import implicit_positions, implicit_solution
 from ..mechanism import Vars
 from ..options import SolverOptions
 from .closure import close_loop
+from .forward_friction import friction_accelerations
 from .model import Model
 from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
@@ -75,6 +76,10 @@ class Integrator:
     - `newton_tol`, `newton_max`: the stage Newton's tolerance (scaled increment; ``None``:
       ``newton_tolerance`` of the dtype) and budget.
     - `options`: the user's ``SolverOptions`` (the loop closures' ``ftol`` and ``cond_max``).
+    - `friction`: joint friction (a ``dynamics.friction.JointFriction``, its parameters in
+      ``p``) or None; `friction_speed`: each of its joints' speed scale ``W`` (rad/s at a
+      pin, m/s in a guide), the regularised sign's band being ``width W``
+      (``dynamics.forward_friction``).
     """
 
     model: Model
@@ -86,6 +91,8 @@ class Integrator:
     newton_tol: float | None = None
     newton_max: int = 12
     options: SolverOptions = SolverOptions()
+    friction: object = None
+    friction_speed: tuple = ()
 
 
 def newton_tolerance(dtype) -> float:
@@ -97,8 +104,10 @@ def newton_tolerance(dtype) -> float:
 
 def rhs(integ: Integrator, p, t, y, qg):
     """``y' = f(t, y)`` with ``y = (u, u_dot, [i])``: ``M u_ddot = tau - h(u, u_dot, t)``
-    (and ``di/dt`` with an inductive motor), the loop closed near ``qg`` (``close_loop``).
-    NaN where the loop cannot be closed.  `p`: the parameter mapping (arrays)."""
+    (and ``di/dt`` with an inductive motor), the loop closed near ``qg`` (``close_loop``);
+    with joint friction ``u_ddot`` is ``forward_friction.friction_accelerations``'.  NaN
+    where the loop cannot be closed; with friction, NaN accelerations (the rates finite)
+    where its Newton did not converge.  `p`: the parameter mapping (arrays)."""
     model, load, iters = integ.model, integ.load, integ.close_iters
     mech = model.mechanism
     dof = mech.dof
@@ -107,7 +116,8 @@ def rhs(integ: Integrator, p, t, y, qg):
     M = mass_matrix(model, q, u, p)
     # h(u, u_dot, t): the inverse-dynamics force at zero input acceleration
     # (for one input: (1/2) M'(u) u_dot^2 - Q(u, u_dot, t)).
-    hvec, _ = generalized_forces(model, q, u, ud, jnp.zeros_like(ud), p, t)
+    if integ.friction is None:
+        hvec, _ = generalized_forces(model, q, u, ud, jnp.zeros_like(ud), p, t)
     tau = jnp.zeros_like(u)
     if load is not None:
         # The convention of every load: fn(q, u, p, v, t) with names (Moment, PointForce),
@@ -122,7 +132,10 @@ def rhs(integ: Integrator, p, t, y, qg):
         at += act.n_states
         tau = tau.at[k_in].add(act.force(state, u[k_in], ud[k_in], t, p))
         rates.append(jnp.reshape(jnp.asarray(act.rate(state, u[k_in], ud[k_in], t, p), y.dtype), (act.n_states,)))
-    udd = solve_small(M, tau - hvec)
+    if integ.friction is None:
+        udd = solve_small(M, tau - hvec)
+    else:
+        udd = friction_accelerations(model, integ.friction, integ.friction_speed, q, u, ud, p, t, M, tau).u_ddot
     f = jnp.concatenate([ud, udd, *rates])
     return jnp.where(ok, f, jnp.nan)
 
@@ -221,6 +234,14 @@ class StepContext(NamedTuple):
     n: jax.Array
 
 
+def _friction_failure(stages, dof: int):
+    """The stage Newton's mark of a non-finite stage with friction: -2 where a stage's rates
+    are finite but its accelerations not (friction's Newton did not converge there: ``rhs``),
+    else -1 (the loop could not be closed)."""
+    jammed = jnp.all(jnp.isfinite(stages[:, :dof])) & ~jnp.all(jnp.isfinite(stages[:, dof:2 * dof]))
+    return jnp.where(jammed, -2.0, -1.0)
+
+
 def stage_newton(cx: StepContext, t, ys, qg):
     """The stage equations ``Z = h A F(ys + Z)`` of the step from ``(t, ys)`` solved by
     simplified Newton from ``Z = 0``: a ``StageSolve`` (with ``f(t, ys)``, free: the first
@@ -255,7 +276,8 @@ def stage_newton(cx: StepContext, t, ys, qg):
         finite = jnp.isfinite(err)
         # err = -1 marks a non-finite stage (the loop could not be closed): stop.
         f0 = jnp.where(it == 0, fb[s], f0)
-        return StageSolve(jnp.where(finite, Z + dZ, Z), it + 1, jnp.where(finite, err, -1.0), (Minv, f0))
+        fail = -1.0 if cx.integ.friction is None else _friction_failure(fb[:s], cx.integ.model.mechanism.dof)
+        return StageSolve(jnp.where(finite, Z + dZ, Z), it + 1, jnp.where(finite, err, fail), (Minv, f0))
 
     # the loop's state is a StageSolve whose last field carries (iteration matrix, f0)
     init = StageSolve(Z0, jnp.zeros((), jnp.int32), jnp.asarray(jnp.inf, Z0.dtype), (eye, jnp.full_like(ys, jnp.nan)))
@@ -265,16 +287,20 @@ def stage_newton(cx: StepContext, t, ys, qg):
 
 def step_status(cx: StepContext, err, pos_ok, y_new):
     """The ``DynStatus`` of one step: the loop not closed, the stages not converged (to
-    ``1e3`` times the tolerance), a non-finite state, an input out of the stroke, or OK."""
+    ``1e3`` times the tolerance), a non-finite state, an input out of the stroke, or OK;
+    with joint friction, ``FRICTION`` where friction's Newton failed at a stage."""
     dof = cx.integ.model.mechanism.dof
     conv = (err >= 0) & (err <= 1e3 * cx.newton_tol)
     finite = jnp.all(jnp.isfinite(y_new))
     out_of_stroke = jnp.any(y_new[:dof] < cx.lo) | jnp.any(y_new[:dof] > cx.hi)
-    return jnp.where(
+    status = jnp.where(
         (err < 0) | ~pos_ok, DynStatus.POSITION,
         jnp.where(~conv, DynStatus.NOT_CONVERGED,
                   jnp.where(~finite, DynStatus.NONFINITE,
                             jnp.where(out_of_stroke, DynStatus.STROKE_END, DynStatus.OK))))
+    if cx.integ.friction is not None:  # -2: friction's Newton failed at a stage (stage_newton)
+        status = jnp.where(err == -2.0, DynStatus.FRICTION, status)
+    return status
 
 
 def advance(cx: StepContext, carry: StepCarry, k):

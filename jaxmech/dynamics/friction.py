@@ -35,6 +35,8 @@ sample: ``FrictionReactions.converged``), and ``s`` is attached to the parameter
 implicit function theorem (``implicit.implicit_solution``): derivatives in every
 parameter, no derivative through the iterations.  With every ``mu`` and ``c`` zero the
 residual is zero at ``s = 0`` and no step is taken: ``x = x0 + X 0 = x0`` exactly.
+Forward dynamics solves the same system with the accelerations free
+(``forward_friction``: ``solve_friction_loads`` with its own ``x0`` and ``X``).
 """
 
 from __future__ import annotations
@@ -55,7 +57,8 @@ from .reactions import joint_axes, reaction_system, solve_reaction_system, unpac
 from .virtual_power import LoadedState
 
 __all__ = ["FrictionJoint", "JointFriction", "FrictionReactions", "joint_speeds", "friction_signs", "friction_reactions",
-           "NEWTON_STEPS"]
+           "friction_parameters", "friction_joints", "friction_norms", "friction_terms", "unit_friction_solutions",
+           "solve_friction_loads", "NEWTON_STEPS"]
 
 #: Newton steps allowed per sample (a converged sample takes 2 to 5).
 NEWTON_STEPS = 40
@@ -109,9 +112,36 @@ class JointFriction:
                                  f"(got radius={fj.radius!r})")
 
 
-def _joints(model: Model, fr: JointFriction):
+def friction_parameters(model: Model, friction: JointFriction | None) -> tuple:
+    """The parameter names joint friction adds to the model's (checked against the model)."""
+    if friction is None:
+        return ()
+    if not isinstance(friction, JointFriction):
+        raise ValueError(f"friction= takes a dynamics.friction.JointFriction (or None), got {type(friction).__name__}")
+    if not model.joints:
+        raise ValueError("friction= needs a model with joints= (a Linkage has them): friction acts at the joints")
+    friction.check(model)
+    return tuple(n for n in friction.parameters if n not in model.parameters)
+
+
+def friction_joints(model: Model, fr: JointFriction):
+    """The model's joint objects carrying friction, in the order of ``fr.joints``."""
     by_name = {joint_name(j): j for j in model.joints}
     return [by_name[fj.joint] for fj in fr.joints]
+
+
+def friction_norms(model: Model, joints) -> tuple:
+    """The columns of each joint's force in the reaction unknowns: a pin's two, a guide's one (its normal force)."""
+    lay = model.layout
+    return tuple(tuple(lay.columns[joint_name(j)][: 2 if isinstance(j, Revolute) else 1]) for j in joints)
+
+
+def friction_terms(fr: JointFriction, p, signs, speeds, dtype):
+    """``(a, d)`` of the friction loads ``s = a |F| + d`` (``a = -mu r sgn``, ``d = -c w``) at one state."""
+    mu = jnp.stack([resolve(fj.mu, p) for fj in fr.joints])
+    arm = jnp.stack([resolve(fj.radius, p) if fj.radius else 1.0 for fj in fr.joints])
+    c = jnp.stack([resolve(fj.damping, p) if fj.damping else 0.0 for fj in fr.joints])
+    return (-mu * arm * signs).astype(dtype), (-c * speeds).astype(dtype)
 
 
 def _direction(model: Model, j, q, u, p):
@@ -135,7 +165,7 @@ def joint_speeds(model: Model, fr: JointFriction, q, u, p, q_dot, u_dot):
         return vg[k] + 1j * om[k] * (at - rg[k])
 
     out = []
-    for j in _joints(model, fr):
+    for j in friction_joints(model, fr):
         a, b = j.bodies
         if isinstance(j, Revolute):
             out.append((om[index[b]] if b != GROUND else 0.0) - (om[index[a]] if a != GROUND else 0.0))
@@ -198,10 +228,12 @@ def _newton(norms, args):
     return last.s, last.done & jnp.all(jnp.isfinite(last.s))
 
 
-def _unit_solutions(model: Model, sys_, st: LoadedState, joints):
+def unit_friction_solutions(model: Model, sys_, st: LoadedState, joints, extra=None):
     """The reactions ``X (n, k)`` to one unit friction load at each joint (a moment of
     1 N m on a pin's second body, a force of 1 N along a guide's direction on its block,
-    their opposites on the first bodies), in one elimination."""
+    their opposites on the first bodies), in one elimination.  `extra` ``{row: (k,)}``:
+    more right-hand side for each unit load (forward dynamics: the inertia of the
+    accelerations it causes), or None."""
     mech, q, u, p = model.mechanism, st.q, st.u, st.p
     base, units = sys_.rhs, []
     for j in joints:
@@ -217,9 +249,25 @@ def _unit_solutions(model: Model, sys_, st: LoadedState, joints):
         units.append(sys_.rhs)
     dtype = q.dtype
     sys_.rhs = {i: jnp.stack([jnp.asarray(x.get(i, 0.0), dtype) for x in units]) for i in range(model.layout.size)}
+    for i, v in (extra or {}).items():
+        sys_.rhs[i] = sys_.rhs[i] + v
     X = solve_reaction_system(model, sys_, st)
     sys_.rhs = base
     return X
+
+
+def solve_friction_loads(norms, a, d, x0, X, ok):
+    """``(s, converged, ok)``: the friction loads ``s (k,)`` solving ``s = a |F(x0 + X s)| +
+    d`` (module docstring) by Newton's method from ``s = 0``, attached to ``(a, d, x0, X)``
+    by the implicit function theorem (no derivative through the iterations); `norms` each
+    joint's force columns in ``x`` (``friction_norms``), `ok` whether the state is valid.
+    `converged`: the Newton's; `ok`: both (where False, ``s`` is 0)."""
+    safe = lambda v: jnp.where(ok, v, 0.0)  # noqa: E731
+    args = (a, d, safe(x0), safe(X))
+    s, conv = _newton(norms, jax.lax.stop_gradient(args))
+    ok = ok & conv
+    s = implicit_solution(functools.partial(_residual, norms), jnp.where(ok, s, 0.0), ok, args)
+    return s, conv, ok
 
 
 class FrictionReactions(NamedTuple):
@@ -245,23 +293,12 @@ def friction_reactions(model: Model, fr: JointFriction, st: LoadedState, signs, 
     sample's ``LoadedState`` (its loads; inertia where it has any), `signs` ``(k,)`` the
     regularised signs of the joints' relative motion (``friction_signs``), `speeds` ``(k,)``
     the relative speeds the viscous terms see (rad/s, m/s)."""
-    p, lay = st.p, model.layout
-    joints = _joints(model, fr)
+    joints = friction_joints(model, fr)
     sys_, geo = reaction_system(model, st)
     x0 = solve_reaction_system(model, sys_, st)  # the frictionless reactions (joint_reactions' own)
-    X = _unit_solutions(model, sys_, st, joints)
-    mu = jnp.stack([resolve(fj.mu, p) for fj in fr.joints])
-    arm = jnp.stack([resolve(fj.radius, p) if fj.radius else 1.0 for fj in fr.joints])
-    c = jnp.stack([resolve(fj.damping, p) if fj.damping else 0.0 for fj in fr.joints])
-    dtype = st.q.dtype
-    a = (-mu * arm * signs).astype(dtype)
-    d = (-c * speeds).astype(dtype)
-    norms = tuple(tuple(lay.columns[joint_name(j)][: 2 if isinstance(j, Revolute) else 1]) for j in joints)
-    safe = lambda v: jnp.where(st.ok, v, 0.0)  # noqa: E731
-    args = (a, d, safe(x0), safe(X))
-    s, conv = _newton(norms, jax.lax.stop_gradient(args))
-    ok = st.ok & conv
-    s = implicit_solution(functools.partial(_residual, norms), jnp.where(ok, s, 0.0), ok, args)
+    X = unit_friction_solutions(model, sys_, st, joints)
+    a, d = friction_terms(fr, st.p, signs, speeds, st.q.dtype)
+    s, conv, ok = solve_friction_loads(friction_norms(model, joints), a, d, x0, X, st.ok)
     dx = X @ s
     x = jnp.where(conv, x0 + dx, jnp.nan)
     _, forces, moments = unpack_reactions(model, x, geo)

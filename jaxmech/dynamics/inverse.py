@@ -23,7 +23,7 @@ from ..options import SolverOptions
 from ..positions import solve_one
 from ..status import Status
 from ..xla import jit
-from .friction import JointFriction, friction_reactions, friction_signs, joint_speeds
+from .friction import JointFriction, friction_parameters, friction_reactions, friction_signs, joint_speeds
 from .joints import Prismatic, Slot, joint_name
 from .model import Model, mechanism_params, prepare_params
 from .reactions import joint_axes, joint_reactions
@@ -307,7 +307,7 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     if p is None or guess is None:
         raise ValueError(f"{mech.name}: inverse_dynamics needs the parameters p= and a guess= at the first sample")
     drive, us, t = drive_samples(mech, drive, t)
-    extra = _friction_names(model, friction)
+    extra = friction_parameters(model, friction)
     model.check_params(p, extra)
     # positions, dq/du and d2q/du2 in one compiled pass; the drive's rates give the rest
     sol, d1, d2 = stroke(mech, us, mechanism_params(model, p), guess, options, derivs=True)
@@ -322,18 +322,6 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     u, ud, udd, out = _along_friction(model, friction, bool(quasi_static), tuple(mech.points), static, leaves, pj, t.astype(dtype),
                                       sol.q, d1, d2)
     return _result(model, t, u, ud, udd, _with_friction_status(out, sol.q, sol.status))
-
-
-def _friction_names(model: Model, friction: JointFriction | None) -> tuple:
-    """The parameter names joint friction adds to the model's (checked against the model)."""
-    if friction is None:
-        return ()
-    if not isinstance(friction, JointFriction):
-        raise ValueError(f"friction= takes a dynamics.friction.JointFriction (or None), got {type(friction).__name__}")
-    if not model.joints:
-        raise ValueError("friction= needs a model with joints= (a Linkage has them): friction acts at the joints")
-    friction.check(model)
-    return tuple(n for n in friction.parameters if n not in model.parameters)
 
 
 def _speed_scale(speeds):
@@ -419,7 +407,7 @@ def holding(model: Model, u, p: Mapping, guess, friction: JointFriction, *, dire
     the batch's joint speeds per unit input rate (``dynamics.friction``), so a joint that
     barely turns at a pose (a toggle) carries less of its friction there."""
     mech = model.mechanism
-    extra = _friction_names(model, friction)
+    extra = friction_parameters(model, friction)
     if friction is None:
         raise ValueError("holding: give friction= (a JointFriction); without friction the holding effort is statics()'s")
     u, guess = as_inputs(mech, u), as_coords(mech, guess)

@@ -18,6 +18,8 @@ class DynStatus(enum.IntEnum):
     - ``NONFINITE``: a non-finite value appeared (mass matrix singular, NaN load...).
     - ``NO_EQUILIBRIUM``: statics: the generalized force does not change sign over the given
       range (no equilibrium in it, or an even number of them).
+    - ``FRICTION``: forward dynamics with joint friction: at some state friction's Newton
+      found no accelerations satisfying the friction law (friction jams the linkage).
     """
 
     OK = 0
@@ -26,6 +28,7 @@ class DynStatus(enum.IntEnum):
     NOT_CONVERGED = 3
     NONFINITE = 4
     NO_EQUILIBRIUM = 5
+    FRICTION = 6
 
 
 _DYN_MESSAGES = {
@@ -35,6 +38,8 @@ _DYN_MESSAGES = {
     DynStatus.NOT_CONVERGED: "Newton did not converge (statics) or an implicit step failed (reduce the step)",
     DynStatus.NONFINITE: "a non-finite value appeared (singular mass matrix, NaN load or parameter)",
     DynStatus.NO_EQUILIBRIUM: "no equilibrium in the given range: the generalized force keeps one sign there",
+    DynStatus.FRICTION: ("joint friction's Newton found no accelerations satisfying the friction law: friction jams the "
+                         "linkage there (or a step too large for the sign's band: use a smaller h)"),
 }
 
 

@@ -1,6 +1,6 @@
 """Forward dynamics of a ``Linkage``: its model (bodies, joints, gravity, loads, springs
-and dampers) driven by a DC motor, stateful actuators or a torque or force law, integrated
-by ``dynamics.forward_dynamics`` from the drawing or from a given input
+and dampers, joint friction) driven by a DC motor, stateful actuators or a torque or force
+law, integrated by ``dynamics.forward_dynamics`` from the drawing or from a given input
 (``linkage_forward_dynamics``, which is ``Linkage.forward_dynamics``)."""
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ import numpy as np
 
 from ..actuators import parameter_names
 from ..dynamics.forward import Trajectory, forward_dynamics
+from ..dynamics.joints import joint_name
+from .friction import friction_key
 
 __all__ = ["actuator_parameters", "linkage_forward_dynamics"]
 
@@ -42,14 +44,51 @@ def _start(lk, u0, values: Mapping):
     return u0, np.asarray(sol.q[0])
 
 
+def _friction_speed(lk, speed):
+    """`friction_speed` as ``dynamics.forward_dynamics`` takes it: a number, or one per
+    friction joint from ``{joint name or key: W}`` (every joint with friction given)."""
+    if not isinstance(speed, Mapping) or getattr(lk, "friction", None) is None:
+        return speed
+    keys = {joint_name(j): friction_key(j) for j in lk.model.joints}
+    out = []
+    for fj in lk.friction.joints:
+        given = [k for k in (fj.joint, keys[fj.joint]) if k in speed]
+        if not given:
+            raise ValueError(f"{lk.name}: friction_speed has no speed scale for {keys[fj.joint]!r} ({fj.joint!r})")
+        out.append(speed[given[0]])
+    unknown = [k for k in speed if k not in {*(fj.joint for fj in lk.friction.joints),
+                                             *(keys[fj.joint] for fj in lk.friction.joints)}]
+    if unknown:
+        raise ValueError(f"{lk.name}: friction_speed: {unknown} carry no friction; the joints with friction are "
+                         f"{[keys[fj.joint] for fj in lk.friction.joints]}")
+    return out
+
+
 def linkage_forward_dynamics(lk, *, h, steps: int, u0=None, u_dot0=0.0, p: Mapping | None = None, motor=None, voltage=None,
-                             current0=0.0, actuators: Mapping | None = None, load: Callable | None = None, **settings) -> Trajectory:
+                             current0=0.0, actuators: Mapping | None = None, load: Callable | None = None, friction_speed=None,
+                             **settings) -> Trajectory:
     """``Linkage.forward_dynamics``: forward dynamics (``jaxmech.forward_dynamics``) of the
-    linkage `lk` with its bodies, gravity, loads, springs and dampers, from the drawing (or
-    from inputs `u0`, reached by continuation on the drawing's assembly mode) at rates
-    `u_dot0`, `steps` steps of `h` (s), driven by `motor` (a ``DCMotor`` on the first input,
-    its `voltage` and initial `current0`), `actuators` (``{input: StatefulActuator}``) or
-    a `load` law ``fn(q, u, p, v, t) -> (dof,)`` (N m or N on each input).
+    linkage `lk` with its bodies, gravity, loads, springs, dampers and joint friction, from
+    the drawing (or from inputs `u0`, reached by continuation on the drawing's assembly
+    mode) at rates `u_dot0`, `steps` steps of `h` (s), driven by `motor` (a ``DCMotor`` on
+    the first input, its `voltage` and initial `current0`), `actuators` (``{input:
+    StatefulActuator}``) or a `load` law ``fn(q, u, p, v, t) -> (dof,)`` (N m or N on each
+    input).
+
+    **Joint friction** (``Linkage(friction=...)``): the friction law of inverse dynamics
+    (``dynamics.friction``: ``mu r |F|`` at a pin, ``mu |N|`` in a guide, times the sign
+    ``tanh(w / (width W))``, plus ``c w``) acts at every state of the run.  A forward run
+    does not know its joints' speeds before it runs, so `friction_speed` gives the scale
+    ``W``: a number (rad/s at a pin, m/s in a guide, e.g. the largest speed expected) or
+    ``{joint name or key: W}``.  Each evaluation of the accelerations solves the
+    accelerations and the friction loads together (friction depends on the joints' forces,
+    which depend on the accelerations): Newton's method from the frictionless solution,
+    attached to the state and parameters by the implicit function theorem, so the run
+    stays differentiable in every parameter, ``mu_<key>``, ``rpin_<key>``, ``cv_<key>``
+    among them (``dynamics.forward_friction``).  Where friction's Newton does not converge
+    (friction jams the linkage) the run stops with ``DynStatus.FRICTION`` and
+    ``Trajectory.message()`` says so.  ``Trajectory.dynamics`` leaves friction out (its
+    ``tau`` then includes friction's generalized force, its reactions are frictionless).
 
     `p`: the linkage's parameters to change (``Linkage.params``) and the values of the
     names the motor and actuators declare (``actuator_parameters``: ``R_a``, ``K_m``,
@@ -58,12 +97,9 @@ def linkage_forward_dynamics(lk, *, h, steps: int, u0=None, u_dot0=0.0, p: Mappi
 
     **Returns** a ``Trajectory``, differentiable in `p` (``jax.grad``, ``jax.jacfwd``);
     ``Trajectory.dynamics(lk.model, p)`` adds the effort and every joint's reaction.
-    **Raises** ``ValueError`` for a linkage with joint friction (not in forward dynamics
-    yet), a parameter the linkage, the motor and the actuators do not know, a missing motor
-    parameter, or an unknown setting."""
-    if getattr(lk, "friction", None) is not None:  # refused, not silently left out (as a scene does)
-        raise ValueError(f"{lk.name}: forward dynamics has no joint friction yet; build the linkage without friction= "
-                         "to run it (or use Linkage.inverse_dynamics with friction along a drive law)")
+    **Raises** ``ValueError`` for a parameter the linkage, the motor and the actuators do
+    not know, a missing motor parameter, an unknown setting, or joint friction without its
+    `friction_speed`."""
     given = dict(p or {})
     extra = actuator_parameters(motor, voltage, actuators)
     missing = [k for k in extra if k not in given]
@@ -77,4 +113,5 @@ def linkage_forward_dynamics(lk, *, h, steps: int, u0=None, u_dot0=0.0, p: Mappi
     values = {**lk.params, **given}
     start_u, guess = _start(lk, u0, {k: values[k] for k in lk.mechanism.params})
     return forward_dynamics(lk.model, values, start_u, u_dot0, guess, h=h, steps=steps, motor=motor, voltage=voltage,
-                            current0=current0, actuators=actuators, load=load, **settings)
+                            current0=current0, actuators=actuators, load=load, friction=getattr(lk, "friction", None),
+                            friction_speed=_friction_speed(lk, friction_speed), **settings)
