@@ -3,7 +3,7 @@
 ```
 jaxmech scenes [SCENE]
 jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR] [--plots all|summary|none]
-jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.html]
+jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.mp4|FILE.html]
 jaxmech export SCENE [--at VALUE] --out FILE.dxf|FILE.svg [--set NAME=VALUE ...] [--stroke [--points N]] [--units m|mm]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
 jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ... | --vary geometry|all] [--seed S] [--figures [--figure NAME=MOD:FN]] --out DIR.parquet
@@ -324,8 +324,13 @@ def _check_destination(args) -> None:
     """Every verb's destination checked (by writing) before anything is computed."""
     if args.verb == "sweep":
         args.out_path = _sweep_out(args)
-    if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".html"):
-        raise UsageError(f"--out must end in .gif or .html, got {args.out!r}")
+    if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".mp4", ".html"):
+        raise UsageError(f"--out must end in .gif, .mp4 or .html, got {args.out!r}")
+    if args.verb == "animate" and args.out and Path(args.out).suffix.lower() == ".mp4":
+        from .drawing import NO_FFMPEG, ffmpeg_path
+
+        if ffmpeg_path() is None:
+            raise UsageError(NO_FFMPEG)
     if args.verb == "export" and Path(args.out).suffix.lower() not in (".dxf", ".svg"):
         raise UsageError(f"--out must end in .dxf or .svg, got {args.out!r}")
     if args.verb in ("run", "report"):

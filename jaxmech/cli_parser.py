@@ -73,17 +73,17 @@ def _add_run(sub) -> None:
 
 
 def _add_animate(sub) -> None:
-    """Add the ``animate`` verb: a GIF or HTML of the stroke."""
+    """Add the ``animate`` verb: a GIF, MP4 or HTML of the stroke."""
     a = sub.add_parser(
         "animate",
-        help="animate a scene's stroke to GIF or HTML",
-        description="Animate SCENE over its stroke, with the paths of its traced points, to a GIF (Pillow) or a self-contained HTML player.",
+        help="animate a scene's stroke to GIF, MP4 or HTML",
+        description="Animate SCENE over its stroke, with the paths of its traced points, to a GIF (Pillow), an MP4 (ffmpeg: pip install \"jaxmech[video]\") or a self-contained HTML player.",
     )
     a.add_argument("scene", metavar="SCENE", help="scene name (see 'jaxmech scenes'), or a linkage file LINKAGE.toml / .json")
     a.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[], help="override a parameter (SI, or a number with its unit: 65deg, 275mm); repeatable")
     a.add_argument("--frames", type=values.positive("--frames"), default=60, metavar="N", help="number of frames (default 60)")
     a.add_argument("--fps", type=values.positive("--fps"), default=20, metavar="N", help="frames per second (default 20)")
-    a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif or FILE.html (default ./SCENE.gif)")
+    a.add_argument("--out", default=None, metavar="FILE", help="FILE.gif, FILE.mp4 or FILE.html (default ./SCENE.gif)")
 
 
 def _add_export(sub) -> None:

@@ -37,11 +37,13 @@ Example (the classic four-bar)::
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import matplotlib
 import numpy as np
-from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
@@ -55,6 +57,7 @@ __all__ = [
     "draw_mechanism",
     "drawing_spec",
     "Drawer",
+    "ffmpeg_path",
     "new_figure",
     "plot_poses",
     "point_positions",
@@ -373,6 +376,31 @@ def plot_poses(result, indices: Sequence[int] | None = None, *, spec: Mapping | 
 
 
 # --------------------------------------------------------------------------- animation
+_ANIMATION_SUFFIXES = (".gif", ".mp4", ".html")
+
+NO_FFMPEG = 'writing an MP4 needs ffmpeg: pip install "jaxmech[video]" (or put ffmpeg on PATH)'
+
+
+def ffmpeg_path() -> str | None:
+    """The ffmpeg binary that ``animate`` writes an MP4 with, or ``None`` when there is none.
+
+    The one the ``video`` extra installs (``imageio-ffmpeg``, a binary inside the wheel; its
+    ``IMAGEIO_FFMPEG_EXE`` overrides it) when that is installed, else the one Matplotlib is
+    set to use (``rcParams["animation.ffmpeg_path"]``, by default ``ffmpeg`` on ``PATH``).
+    Nothing global is changed: ``animate`` points Matplotlib at it for its save only.
+    """
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        pass
+    else:
+        try:
+            return imageio_ffmpeg.get_ffmpeg_exe()
+        except RuntimeError:  # the package without a usable binary (an unsupported platform)
+            pass
+    return shutil.which(str(matplotlib.rcParams["animation.ffmpeg_path"]))
+
+
 def animate(
     result,
     path: str | Path | None = None,
@@ -387,21 +415,27 @@ def animate(
 
     **Arguments**
 
-    - `path`: ``*.gif`` (written with Pillow) or ``*.html`` (a self-contained JavaScript
-      player, ``to_jshtml``); ``None`` writes nothing (call ``.to_jshtml()`` yourself, in a
-      notebook ``IPython.display.HTML(animate(result).to_jshtml())``).
+    - `path`: ``*.gif`` (written with Pillow), ``*.mp4`` (H.264, written by ffmpeg: see
+      ``ffmpeg_path``) or ``*.html`` (a self-contained JavaScript player, ``to_jshtml``);
+      ``None`` writes nothing (call ``.to_jshtml()`` yourself, in a notebook
+      ``IPython.display.HTML(animate(result).to_jshtml())``).
     - `frames`: number of frames, evenly spaced over the samples (at most the number of
       samples: run the scene with ``points >= frames``).
     - `trace`: points whose paths are traced (default: the spec's ``trace``).
-    - `fps`: frames per second; `dpi`: resolution of a GIF.
+    - `fps`: frames per second; `dpi`: resolution of a GIF or an MP4.
 
     **Returns** the ``FuncAnimation``.  **Raises** ``ValueError`` for a bad suffix or
-    frame count.
+    frame count; ``RuntimeError`` for an MP4 with no ffmpeg (before anything is drawn).
     """
-    if path is not None and Path(path).suffix.lower() not in (".gif", ".html"):
-        raise ValueError(f"animation path must end in .gif or .html, got {str(path)!r}")
+    if path is not None and Path(path).suffix.lower() not in _ANIMATION_SUFFIXES:
+        raise ValueError(f"animation path must end in .gif, .mp4 or .html, got {str(path)!r}")
     if int(frames) < 1:
         raise ValueError(f"frames must be at least 1, got {frames}")
+    ffmpeg = None
+    if path is not None and Path(path).suffix.lower() == ".mp4":
+        ffmpeg = ffmpeg_path()
+        if ffmpeg is None:
+            raise RuntimeError(NO_FFMPEG)
     n = result.motion.q.shape[0]
     idx = np.unique(np.round(np.linspace(0, n - 1, min(int(frames), n))).astype(int))
     # A fixed layout: constrained layout would be recomputed for every frame (3x slower).
@@ -415,6 +449,10 @@ def animate(
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.suffix.lower() == ".gif":
             anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)
+        elif ffmpeg is not None:
+            # Matplotlib's writer finds its binary through rcParams: set for this save only.
+            with matplotlib.rc_context({"animation.ffmpeg_path": ffmpeg}):
+                anim.save(str(path), writer=FFMpegWriter(fps=fps, codec="h264"), dpi=dpi)
         else:
             path.write_text(anim.to_jshtml(fps=fps), encoding="utf-8")
     return anim

@@ -206,7 +206,7 @@ MISTAKES = {
     "no frames": (["animate", "fourbar", "--frames", "0"], "--frames must be at least 1, got 0"),
     "frame rate not a number": (["animate", "fourbar", "--fps", "x"], "--fps must be a whole number"),
     # files
-    "animation format": (["animate", "fourbar", "--out", "x.mp4"], "must end in .gif or .html"),
+    "animation format": (["animate", "fourbar", "--out", "x.avi"], "must end in .gif, .mp4 or .html"),
     "sweep output is a folder": (["sweep", "fourbar", "--grid", "a=1:2:3", "--out", "."], "is a folder; give a file name"),
     "animation output is a folder": (["animate", "fourbar", "--out", "made.gif"], "is a folder; give a file name"),
     "run output is a file": (["run", "fourbar", "--out", "a_file"], "is a file, not a folder"),
@@ -317,6 +317,36 @@ def test_animate_gif(tmp_path):
     with Image.open(out) as im:
         assert im.n_frames == 5
     assert "5 frames" in proc.stdout
+
+
+def test_animate_mp4(tmp_path):
+    """An MP4 (H.264, through the ``video`` extra's ffmpeg): an ISO media file, one frame per --frames."""
+    import imageio_ffmpeg
+
+    out = tmp_path / "fb.mp4"
+    proc = jaxmech("animate", "fourbar", "--frames", "5", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_bytes()[4:8] == b"ftyp"  # the ISO base media file's first box
+    assert imageio_ffmpeg.count_frames_and_secs(str(out))[0] == 5
+    assert "5 frames" in proc.stdout
+
+
+def test_animate_mp4_without_ffmpeg(tmp_path, capsys, monkeypatch):
+    """Neither the ``video`` extra nor an ffmpeg for Matplotlib: one line naming the extra,
+    exit 2, before JAX is set up and with nothing written."""
+    import matplotlib
+
+    import jaxmech.cli as cli
+
+    def trap():
+        raise AssertionError("ffmpeg was not looked for before computing")
+
+    monkeypatch.setattr(cli, "_setup_jax", trap)
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # its import fails
+    monkeypatch.setitem(matplotlib.rcParams, "animation.ffmpeg_path", str(tmp_path / "no-ffmpeg"))
+    assert main(["animate", "fourbar", "--out", str(tmp_path / "fb.mp4")]) == 2
+    one_line_error(capsys.readouterr().err, 'pip install "jaxmech[video]"')
+    assert not list(tmp_path.iterdir())
 
 
 def test_sweep_writes_one_row_per_design_and_point(tmp_path):

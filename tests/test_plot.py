@@ -7,6 +7,7 @@ jax.config.update("jax_enable_x64", True)
 
 import dataclasses  # noqa: E402
 import math  # noqa: E402
+import sys  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -262,8 +263,29 @@ def test_animate_gif_and_html(fourbar, tmp_path):
     anim = plot.animate(fourbar, tmp_path / "fb.html", frames=3)
     html = (tmp_path / "fb.html").read_text()
     assert "<script" in html and html.count("data:image/png;base64") == 3
-    with pytest.raises(ValueError, match=r"\.gif or \.html"):
-        plot.animate(fourbar, tmp_path / "fb.mp4")
+    with pytest.raises(ValueError, match=r"\.gif, \.mp4 or \.html"):
+        plot.animate(fourbar, tmp_path / "fb.avi")
+
+
+def test_animate_mp4_leaves_matplotlib_settings(fourbar, tmp_path, monkeypatch):
+    """An MP4 through the ``video`` extra's ffmpeg, pointed at for the save only; without any
+    ffmpeg, a ``RuntimeError`` naming the extra before anything is drawn."""
+    import imageio_ffmpeg
+    import matplotlib
+
+    before = matplotlib.rcParams["animation.ffmpeg_path"]
+    anim = plot.animate(fourbar, tmp_path / "fb.mp4", frames=4, dpi=40)
+    assert matplotlib.rcParams["animation.ffmpeg_path"] == before
+    assert len(anim.frame_indices) == 4
+    data = (tmp_path / "fb.mp4").read_bytes()
+    assert data[4:8] == b"ftyp"
+    assert imageio_ffmpeg.count_frames_and_secs(str(tmp_path / "fb.mp4"))[0] == 4
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)
+    monkeypatch.setitem(matplotlib.rcParams, "animation.ffmpeg_path", str(tmp_path / "no-ffmpeg"))
+    with pytest.raises(RuntimeError, match=r'pip install "jaxmech\[video\]"'):
+        plot.animate(fourbar, tmp_path / "none.mp4", frames=2)
+    assert not (tmp_path / "none.mp4").exists()
 
 
 def test_save_default_plots(fourbar, slider, tmp_path):
