@@ -196,3 +196,41 @@ def test_no_absolute_machine_path_in_the_repository():
             continue
         found += [f"{name}:{i}" for i, line in enumerate(text.splitlines(), 1) if pattern.search(line)]
     assert not found, found
+
+
+CLOCKS = {"perf_counter", "time", "monotonic", "perf_counter_ns", "monotonic_ns"}
+CLOCK_WORDS = ("elapsed", "seconds", "wall")
+
+
+def _reads_a_clock(node) -> bool:
+    return any(isinstance(n, ast.Call) and isinstance(n.func, (ast.Attribute, ast.Name))
+               and (n.func.attr if isinstance(n.func, ast.Attribute) else n.func.id) in CLOCKS for n in ast.walk(node))
+
+
+def wall_clock_asserts(source: str, where: str = "") -> list:
+    """Every ``assert`` that reads a clock, a name assigned from one, or a name that says it
+    holds a duration (``elapsed``, ``seconds``, ``wall``): timings belong in benchmarks (a
+    loaded machine fails a wall-clock test)."""
+    tree = ast.parse(source)
+    timed = {t.id for n in ast.walk(tree) if isinstance(n, ast.Assign) and _reads_a_clock(n.value)
+             for t in n.targets if isinstance(t, ast.Name)}
+    found = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Assert):
+            called = {id(x.func) for x in ast.walk(n.test) if isinstance(x, ast.Call)}
+            names = {x.id for x in ast.walk(n.test) if isinstance(x, ast.Name) and id(x) not in called}
+            if _reads_a_clock(n.test) or names & timed or any(w in x for x in names for w in CLOCK_WORDS):
+                found.append(f"{where}:{n.lineno}")
+    return found
+
+
+def test_no_test_asserts_a_wall_clock_time():
+    found = [f for path in sorted((ROOT / "tests").rglob("*.py")) for f in wall_clock_asserts(path.read_text(), path.name)]
+    assert not found, found
+
+
+def test_the_wall_clock_rule_sees_what_it_should():
+    assert wall_clock_asserts("import time\nt0 = time.perf_counter()\nf()\nassert time.perf_counter() - t0 < 3\n")
+    assert wall_clock_asserts("t = time.time()\nassert t < 5\n")
+    assert wall_clock_asserts("elapsed = run()\nassert elapsed < 120\n")
+    assert not wall_clock_asserts("x = f()\nassert x < 3\n")

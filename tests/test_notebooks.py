@@ -4,8 +4,9 @@ Each notebook is executed by ``nbclient`` in a kernel of *this* interpreter (the
 ``python3`` kernel, which jupyter_client starts with ``sys.executable``; checked below),
 in a temporary working directory, on an in-memory copy: nothing is written into the
 repository.  The kernel inherits the environment (``XLA_FLAGS`` from ``conftest.py``) and
-shares the CLI tests' persistent XLA cache.  Timings are printed (``pytest -s``), not
-asserted: the notebooks are meant to run in well under a minute on a two-core CPU.
+shares the CLI tests' persistent XLA cache.  Timings are printed (``pytest -s``), never
+asserted (a loaded machine would fail them: a wall-clock limit is a benchmark's, not a
+test's); the per-cell timeout only catches a hang.
 """
 
 import os
@@ -20,7 +21,7 @@ from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-TIMEOUT = 120  # s per cell; a notebook's cells together are also held to this below
+TIMEOUT = 900  # s per cell: catches a hang, never a slow machine (the notebooks take seconds to a minute)
 CACHE = Path(tempfile.gettempdir()) / "jaxmech-test-xla-cache"
 KERNEL = "python3"
 
@@ -69,7 +70,6 @@ def test_notebook_runs(path, tmp_path):
     assert 'jax.config.update("jax_enable_x64", True)' in first.source, "x64 is switched on in the first code cell"
     elapsed = _execute(nb, tmp_path)
     print(f"\n{path.name}: {elapsed:.1f} s")
-    assert elapsed < TIMEOUT, f"{path.name} took {elapsed:.0f} s"
     assert _stderr(nb) == [], f"{path.name} wrote to stderr (a warning?): {_stderr(nb)}"
     assert list(tmp_path.iterdir()) == [], f"{path.name} wrote files: {list(tmp_path.iterdir())}"
     assert _kinds(nb) == committed, (
