@@ -6,7 +6,7 @@
   and friction loads along a reversing drive, bit for bit;
 - a misspelt or bad friction entry is refused in one line naming the file, the key and the
   fix;
-- ``jaxmech run`` on a file with friction answers one line (the command line's scenes do
+- ``jaxmech run`` (``scenes``, ``animate``, ``export``, ``sweep``) on a file with friction answers one line (the command line's scenes do
   not take friction yet), no traceback, nothing written; a scene made of a linkage with
   friction by ``linkage_scene`` itself is refused too.
 """
@@ -157,7 +157,8 @@ def test_bad_friction_in_json_names_the_file_and_the_key(tmp_path):
 def test_the_command_line_answers_a_file_with_friction_in_one_line(tmp_path, monkeypatch, capsys):
     (tmp_path / "press.toml").write_text(DRAWING + FRICTION_TOML)
     monkeypatch.chdir(tmp_path)
-    for verb in (["run", "press.toml", "--plots", "none"], ["scenes", "press.toml"]):
+    for verb in (["run", "press.toml", "--plots", "none"], ["scenes", "press.toml"], ["animate", "press.toml", "--out", "p.gif"],
+                 ["export", "press.toml", "--out", "p.svg"], ["sweep", "press.toml", "--grid", "m_rod=1:2:2", "--out", "p.csv"]):
         assert main(verb) == 2
         err = capsys.readouterr().err
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
