@@ -6,6 +6,9 @@ point through (or nearest to) N target points.  ``docs/path_synthesis.md`` expla
 - ``BULATOVIC_TARGETS``: the 12 closed-path targets of Bulatovic et al. (2016); their own
   linkage (``BULATOVIC_SOLUTION``) scores 0.00352 by ``path_error``, the synthesis 0.00252.
 - ``draw``: the found linkage drawn over its targets (Matplotlib, no pyplot).
+- ``CRUNODE``, ``TOGGLE_ARC`` and ``noisy_targets``: two curves with an exact answer, a
+  figure-eight closed curve and a toggle-to-toggle open arc, sampled from their generating
+  four-bars with small known noise (the generator's own error is then the noise floor).
 
 Run ``python -m examples.path_synthesis`` for the reports, ``--figure PATH.png`` to draw them
 (the docs page's figure is ``--figure docs/img/path_synthesis.png``).
@@ -19,10 +22,10 @@ from typing import NamedTuple
 import numpy as np
 from matplotlib.figure import Figure
 
-from jaxmech.design import PathSynthesis, coupler_curve, path_error, synthesize_path
+from jaxmech.design import PathSynthesis, coupler_curve, crank_intervals, path_error, synthesize_path
 
-__all__ = ["BULATOVIC_SOLUTION", "BULATOVIC_TARGETS", "CRANK_ROCKER", "STRAIGHT_LINE", "draw", "main", "Pins", "pins", "synthesize",
-           "target_curve"]
+__all__ = ["BULATOVIC_SOLUTION", "BULATOVIC_TARGETS", "CRANK_ROCKER", "CRUNODE", "STRAIGHT_LINE", "TOGGLE_ARC", "draw", "main",
+           "noisy_targets", "Pins", "pins", "synthesize", "target_curve"]
 
 #: A crank-rocker (m, rad): crank a about (x0, y0), ground d at angle phi, coupler b, rocker c,
 #: coupler point (px, py) in the coupler's frame; mode +1 (jaxmech.design.coupler_path).
@@ -35,6 +38,30 @@ BULATOVIC_SOLUTION = {"x0": 1.14265, "y0": 0.48237, "phi": 0.16502, "a": 1.14644
                       "px": 2.6666 * np.cos(-1.1364), "py": 2.6666 * np.sin(-1.1364), "mode": 1.0}
 #: Nine points on a straight segment, (x, y) rows: an open path (a straight-line mechanism).
 STRAIGHT_LINE = np.stack([np.linspace(0.0, 1.0, 9), np.zeros(9)], axis=1)
+#: A Grashof crank-rocker (crank 1, coupler 2, rocker 2.5, ground 2.5) with its coupler point
+#: far off the coupler line: its coupler curve crosses itself once (a crunode, a figure eight).
+CRUNODE = {"x0": 0.4, "y0": -0.3, "phi": 0.35, "a": 1.0, "b": 2.0, "c": 2.5, "d": 2.5, "px": 3.0, "py": 2.5, "mode": 1.0}
+#: Hsieh (2017)'s open-curve linkage ("sharp", as transcribed by four-bar-rs, test-fb): a
+#: non-Grashof triple rocker (crank 10, coupler 3, rocker 3, ground 7) whose crank swings
+#: between its two toggles; its coupler point 20 from the crank pin.
+TOGGLE_ARC = {"x0": -2.0, "y0": -3.0, "phi": 0.2, "a": 10.0, "b": 3.0, "c": 3.0, "d": 7.0, "px": 20.0 * np.cos(1.5),
+              "py": 20.0 * np.sin(1.5), "mode": -1.0}
+
+
+def noisy_targets(generator: dict, curve: str, n: int = 30, noise: float = 1e-3, seed: int = 0):
+    """`n` points of `generator`'s coupler curve, complex ``(n,)``: once round at even crank
+    angles for a closed curve, across its toggle-free crank interval (transmission angle >= 5
+    deg; toggle to toggle for a triple rocker) for an open one; each coordinate moved by
+    normal noise of `noise` times the points' rms radius (numpy's generator, `seed`)."""
+    if curve == "closed":
+        alpha = 0.1 + np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    else:
+        (lo, hi), *_ = crank_intervals(generator, 5.0)
+        alpha = lo + (hi - lo) * (np.arange(n) + 0.5) / n
+    T = coupler_curve(generator, alpha)
+    size = np.sqrt(np.mean(np.abs(T - T.mean()) ** 2))
+    rng = np.random.default_rng(seed)
+    return T + noise * size * (rng.normal(size=n) + 1j * rng.normal(size=n))
 
 
 def target_curve(kind: str, n: int = 10):
@@ -99,7 +126,7 @@ def draw(ax, res: PathSynthesis, targets, title: str = "") -> None:
     ax.fill([A.real, B.real, closest[0].real], [A.imag, B.imag, closest[0].imag], color="0.6", alpha=0.5)
     ax.plot([O2.real, O4.real], [O2.imag, O4.imag], "^", color="k", ms=9)
     ax.set_aspect("equal")
-    ax.set_title(f"{title}\nrms distance {res.error:.3g}; {res.starts_at_best()} of {res.starts} starts at the best",
+    ax.set_title(f"{title}\nrms distance {res.error:.3g}; {res.reached_best} of {res.starts} starts at the best",
                  fontsize=9)
     ax.legend(fontsize=7, loc="best")
 

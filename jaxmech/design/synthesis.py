@@ -7,11 +7,14 @@ target (each target's own curve parameter: at the optimum the residual is orthog
 curve, its length the distance to the curve), or over the design alone when the crank
 angles are prescribed.
 
-- Starts: random four-bar shapes, each sampled once along its crank and placed on the
-  targets by the best similarity (rotation, scale, translation: closed form), first with
-  crank angles spread along the targets by arc length (several phases, both turning
-  directions, both modes), then by two closest-point iterations (each target to its
-  nearest curve sample, the similarity again).
+- Starts: random four-bar shapes (8000 by default), each sampled once along its crank and
+  placed on the targets by the best similarity (rotation, scale, translation: closed form).
+  With free crank angles the targets go to the points at the same fractions of arc length
+  along the shape's curve as along the targets (several phases, both directions, both
+  modes; a curve descriptor that does not depend on how fast the crank draws the curve),
+  then two closest-point iterations (each target to its nearest curve sample, the
+  similarity again); with prescribed or ordered crank angles, to the same fractions of the
+  crank's interval.
 - The best-placed starts (1024 by default) are solved as one batch by Levenberg-Marquardt:
   residuals and their exact Jacobians for every (start, target) pair from one compiled JAX
   program (forward mode; the same program for every problem size), the steps in numpy with
@@ -21,6 +24,9 @@ angles are prescribed.
   `max_size`), so every iterate is a feasible design.  Successive halving keeps the best
   quarter after 12, 24, 48... steps; the last eight go on to convergence (at most 150
   steps); then one round of basin hopping (perturbed copies of the best four) the same way.
+- A polish on the exact distance (free crank angles): the best eight starts' targets moved
+  to their nearest points on the design's curve (the least squares can hold a target on the
+  wrong branch of a curve that crosses itself), Levenberg-Marquardt again, up to 3 times.
 - The best few are scored by ``path_error``; the best wins.
 
 The starts are ``jaxmech.design.synthesis_starts``; the least squares, successive halving
@@ -36,7 +42,7 @@ import numpy as np
 
 from .coupler_path import (CURVES, PARAMS, TAU, PathError, cos_transmission_limit, coupler_curve, crank_interval, crank_intervals,
                            fully_rotatable, local_point, path_error, read_targets, transmission_angle)
-from .synthesis_lsq import Pool, Problem, basin_hopping, evaluator, successive_halving
+from .synthesis_lsq import Pool, Problem, basin_hopping, evaluator, reassigned, successive_halving
 from .synthesis_lsq import polish as polish_start
 from .synthesis_starts import placed_starts
 
@@ -67,6 +73,8 @@ class PathSynthesis:
       where it stopped (successive halving stops most of them early; ``inf``: infeasible).
     - `wall_s` (everything, compile included), `compile_s` (0 when an earlier call compiled
       the same program), `iterations`: ``(starts,)`` Levenberg-Marquardt steps of each.
+    - `reached_best`: how many starts ended at the best answer (``starts_at_best()``, within
+      0.1 %): evidence for the answer; 1 is a lucky start (try another `seed`, more `shapes`).
 
     ``starts_at_best()`` counts the starts that ended at the best answer: many (the optimum
     was found from many places) is more trust than one (a lucky start: try another `seed`).
@@ -83,6 +91,7 @@ class PathSynthesis:
     iterations: np.ndarray
     wall_s: float
     compile_s: float
+    reached_best: int = 0
 
     def starts_at_best(self, rtol: float = 1e-3) -> int:
         """Starts whose own error (`start_errors`, length units) ended within `rtol` (relative)
@@ -99,7 +108,7 @@ class PathSynthesis:
     def report(self) -> str:
         lines = [f"path synthesis ({self.curve} curve, {'prescribed' if self.timed else 'free'} crank angles): "
                  f"rms distance to the curve {self.error:.6g}; {self.feasible_starts}/{self.starts} starts feasible, "
-                 f"{self.starts_at_best()} at the best (0.1 %); {self.wall_s:.2f} s ({self.compile_s:.2f} s compiling)"]
+                 f"{self.reached_best} at the best (0.1 %); {self.wall_s:.2f} s ({self.compile_s:.2f} s compiling)"]
         if self.design is not None:
             lines.append("  " + ", ".join(f"{k} = {v:.6g}" for k, v in self.design.items()))
             lines.append(f"  max distance {self.path.max_distance:.3g}, sum of squares {self.path.sum_squares:.4g}, "
@@ -158,7 +167,7 @@ def checked_targets(targets, alpha, modes):
     return T, alpha, modes
 
 
-def synthesize_path(targets, curve: str = "closed", alpha=None, *, starts: int | None = None, shapes: int = 4000,
+def synthesize_path(targets, curve: str = "closed", alpha=None, *, starts: int | None = None, shapes: int = 8000,
                     rounds=None, iterations: int = 150, hops: int = 1, ordered: bool = False, modes=(1, -1),
                     min_transmission: float = 5.0, max_size: float = 10.0, seed: int = 0, score: int = 3,
                     polish: bool = False) -> PathSynthesis:
@@ -221,13 +230,15 @@ def synthesize_path(targets, curve: str = "closed", alpha=None, *, starts: int |
     pool = successive_halving(pb, x0.copy(), th0.copy(), m0, _rounds(starts, rounds, iterations))
     # basin hopping: perturbed copies of the best few, solved the same way
     pool = basin_hopping(pb, pool, rng, hops, iterations)
+    pool = reassigned(pb, pool)
     start_err = np.sqrt(pool.cost / n) * size
     design, pe = best_scored(pb, pool, start_err, T, centre, size, score, polish, min_transmission)
     wall = time.perf_counter() - t_start
     cost = pool.cost
-    return PathSynthesis(design=design, error=pe.error if pe is not None else np.inf, path=pe, curve=curve, timed=timed,
-                         starts=int(cost.size), feasible_starts=int(np.sum(np.isfinite(cost))), start_errors=start_err,
-                         iterations=pool.iterations, wall_s=wall, compile_s=compile_s)
+    res = PathSynthesis(design=design, error=pe.error if pe is not None else np.inf, path=pe, curve=curve, timed=timed,
+                        starts=int(cost.size), feasible_starts=int(np.sum(np.isfinite(cost))), start_errors=start_err,
+                        iterations=pool.iterations, wall_s=wall, compile_s=compile_s)
+    return dataclasses.replace(res, reached_best=res.starts_at_best())
 
 
 def _denormalise(x, mode, centre, size) -> dict:

@@ -17,10 +17,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..xla import jit
-from .coupler_path import TAU, crank_interval
+from .coupler_path import TAU, crank_interval, local_point
 
-__all__ = ["CHUNK", "LMResult", "PairEvaluation", "Pool", "Problem", "basin_hopping", "evaluate_pairs", "evaluator", "feasible",
-           "levenberg_marquardt", "point_real", "polish", "successive_halving"]
+__all__ = ["CHUNK", "LMResult", "PairEvaluation", "Pool", "Problem", "basin_hopping", "closest_angles", "evaluate_pairs", "evaluator",
+           "feasible", "levenberg_marquardt", "point_real", "polish", "reassigned", "successive_halving"]
 
 # =========================================================================== least squares
 CHUNK = 1024  #: (start, target) pairs per call of the compiled evaluator: one program for every problem
@@ -292,7 +292,13 @@ def successive_halving(pb: Problem, X, TH, M, schedule) -> Pool:
     cost, lam = np.zeros(X.shape[0]), np.full(X.shape[0], 1e-3)
     its = np.zeros(X.shape[0], int)
     alive = np.arange(X.shape[0])
-    for keep_n, steps in schedule:
+    for stage, (keep_n, steps) in enumerate(schedule):
+        if stage and pb.alpha is None and not pb.ordered:  # the best twice over to their nearest points, then the cut
+            alive = alive[np.argsort(cost[alive], kind="stable")[: 2 * keep_n]]
+            alive = alive[np.isfinite(cost[alive])]
+            for b0 in range(0, alive.size, 128):
+                blk = alive[b0:b0 + 128]
+                TH[blk], cost[blk] = closest_angles(X[blk], TH[blk], M[blk], pb.tg, pb.curve, pb.cmu)
         if alive.size > keep_n:
             alive = alive[np.argsort(cost[alive], kind="stable")[:keep_n]]
             alive = alive[np.isfinite(cost[alive])]
@@ -323,3 +329,60 @@ def basin_hopping(pb: Problem, pool: Pool, rng, hops: int, iterations: int) -> P
         X, TH, cost = np.concatenate([X, Xh]), np.concatenate([TH, THh]), np.concatenate([cost, ch])
         m0, its = np.concatenate([m0, m0[src]]), np.concatenate([its, ih])
     return Pool(X, TH, m0, cost, its)
+
+
+def closest_angles(x, th, mode, tg, curve, cmu, samples=720):
+    """Each target's nearest point on each design's feasible curve, on a sampling of
+    `samples` crank angles (the whole turn for a crank that turns fully, else the toggle-free
+    interval the first target's angle is in), taken where it is nearer than the point at the
+    target's crank angle now: ``(th (K, n), cost (K,))``, the crank angles from the ground
+    line and the sum of squared distances at them (never above the cost at `th`)."""
+    a, b, c, d = (np.exp(x[:, i])[:, None] for i in range(3, 7))
+    full, center, half, two, _ = crank_interval(a[:, 0], b[:, 0], c[:, 0], d[:, 0], cmu)
+    if curve == "open":
+        ctr = np.where(two & (np.sin(th[:, 0]) < 0), -center, center)
+        ctr = ctr + TAU * np.round((th[:, 0] - ctr) / TAU)
+    else:
+        ctr, half = th[:, 0], np.full(th.shape[0], np.pi)
+    u = np.linspace(-1.0, 1.0, samples)[1:-1] if curve == "open" else np.linspace(-1.0, 1.0, samples, endpoint=False)
+    grid = np.where(full[:, None], th[:, :1] + np.pi * u, ctr[:, None] + half[:, None] * u)  # (K, S)
+    grid = np.concatenate([th, grid], axis=1)  # the crank angles now first: kept unless another is nearer
+
+    def distances(cols):
+        C, s2 = local_point(np, a, b, c, d, x[:, 7:8], x[:, 8:9], mode[:, None], cols)
+        P = np.where(s2 > 0, x[:, :1] + 1j * x[:, 1:2] + np.exp(1j * x[:, 2:3]) * C, np.nan)
+        return np.abs((tg[:, 0] + 1j * tg[:, 1])[None, :, None] - P[:, None, :])  # (K, n, cols)
+
+    n = th.shape[1]
+    now = np.diagonal(distances(th), axis1=1, axis2=2)  # (K, n): each target at its own angle
+    dist = distances(grid[:, n:])
+    j = np.argmin(np.where(np.isfinite(dist), dist, np.inf), axis=2)
+    near = np.take_along_axis(dist, j[..., None], axis=2)[..., 0]
+    take = np.isfinite(near) & ~(near >= now)
+    th = np.where(take, np.take_along_axis(grid[:, n:], j, axis=1), th)
+    return th, np.sum(np.where(take, near, now) ** 2, axis=1)
+
+
+def reassigned(pb: Problem, pool: Pool, count: int = 8, rounds: int = 3, iterations: int = 60) -> Pool:
+    """A polish on the exact distance: the best `count` starts' targets moved to their nearest
+    points on the design's curve (``closest_angles``: the least squares can stop with a target
+    held on the wrong branch of a curve that crosses itself, or on the wrong side of a cusp),
+    then Levenberg-Marquardt again; kept where the error drops, `rounds` times.  Free crank
+    angles only (``pb.alpha`` None, not ``pb.ordered``); changes `pool` in place."""
+    X, TH, M, cost, its = pool
+    if pb.alpha is not None or pb.ordered:
+        return pool
+    idx = np.argsort(cost)[:count]
+    idx = idx[np.isfinite(cost[idx])]
+    for _ in range(int(rounds)):
+        if idx.size == 0:
+            break
+        th, _ = closest_angles(X[idx], TH[idx], M[idx], pb.tg, pb.curve, pb.cmu)
+        x, th, c, it_, _ = levenberg_marquardt(X[idx].copy(), th, M[idx], pb.tg, None, pb.curve, False, pb.max_size, pb.cmu,
+                                               iterations)
+        better = np.isfinite(c) & (c < cost[idx] * (1 - 1e-9))
+        t = idx[better]
+        X[t], TH[t], cost[t] = x[better], th[better], c[better]
+        its[idx] += it_
+        idx = t
+    return pool

@@ -12,7 +12,7 @@ import numpy as np
 
 from .coupler_path import TAU, crank_interval, local_point
 
-__all__ = ["placed_starts", "Starts", "GRID"]
+__all__ = ["placed_starts", "Starts", "GRID", "ARC_TARGETS", "arc_indices"]
 
 
 # =========================================================================== starts (numpy)
@@ -53,6 +53,7 @@ def _random_shapes(rng, m, rotatable_fraction, cmu):
 
 
 GRID = 128  #: samples per random shape's coupler curve when placing it on the targets
+ARC_TARGETS = 12  #: targets (evenly spread along the list) an arc-length placement is scored on
 
 
 class Starts(NamedTuple):
@@ -136,10 +137,30 @@ def placement_positions(sg: ShapeGrid, targets_n, alpha, closed: bool, rng):
     return np.stack(us, axis=1), phis
 
 
-def placement_costs(sg: ShapeGrid, U, phis, sub, Ts, mode_choices) -> list:
+def arc_indices(C, full, V):
+    """Grid indices ``(m, P, k)`` of the points at arc-length fractions `V` ``(m, P, k)`` along
+    each sampled curve `C` ``(m, GRID)`` (once round, the closing chord included, where the
+    crank turns `full`y; its interval's end to end otherwise): a curve's points are spaced
+    by its speed along the crank, which varies most on the curves a far coupler point draws
+    (loops, cusps, crossings), so a target's arc-length fraction places it better than the
+    same fraction of crank angle."""
+    m = C.shape[0]
+    seg = np.nan_to_num(np.abs(np.diff(C, axis=1, append=C[:, :1])))  # (m, GRID): chord g -> g + 1
+    seg[:, -1] = np.where(full, seg[:, -1], 0.0)
+    cum = np.concatenate([np.zeros((m, 1)), np.cumsum(seg, axis=1)], axis=1)  # (m, GRID + 1)
+    cum = cum / np.maximum(cum[:, -1:], 1e-300) + 2.0 * np.arange(m)[:, None]  # rows apart: one search for all
+    want = V.reshape(m, -1) + 2.0 * np.arange(m)[:, None]
+    g = np.searchsorted(cum.reshape(-1), want.reshape(-1)).reshape(m, -1) - (GRID + 1) * np.arange(m)[:, None]
+    lo = np.clip(g - 1, 0, GRID)
+    nearer = np.take_along_axis(cum, np.clip(g, 0, GRID), 1) - want < want - np.take_along_axis(cum, lo, 1)
+    return np.mod(np.where(nearer, g, lo), GRID).reshape(V.shape)
+
+
+def placement_costs(sg: ShapeGrid, U, phis, sub, Ts, mode_choices, arc: bool = False) -> list:
     """A ``Placement`` per assembly mode: the sampled curve points at the placements'
     positions of the targets `sub` (``Ts``), taken to them by the best similarity (rotation
-    fixed by `phis` when crank angles are prescribed): closed form."""
+    fixed by `phis` when crank angles are prescribed): closed form.  With `arc`, `U` are
+    fractions of each curve's arc length (``arc_indices``), not of its crank interval."""
     m = sg.a.size
     Tc = Ts - Ts.mean()
     inside = np.all((U >= 0) & (U < 1), axis=-1)
@@ -148,6 +169,8 @@ def placement_costs(sg: ShapeGrid, U, phis, sub, Ts, mode_choices) -> list:
     for mode in mode_choices:
         C, s2 = local_point(np, sg.a[:, None], sg.b[:, None], sg.c[:, None], 1.0, sg.px[:, None], sg.py[:, None], mode, sg.grid)
         C = np.where(s2 >= 0, C, np.nan)
+        if arc:
+            idx = arc_indices(C, sg.full, np.clip(U[..., sub], 0.0, 1.0))
         P = np.take_along_axis(C[:, None, :], idx.reshape(m, -1, sub.size), axis=2) if U.ndim == 3 else None
         if phis is not None:
             rot = np.exp(1j * phis)[:, :, None]
@@ -202,15 +225,18 @@ def closest_point_fit(curves, z, w, Ts, targets_n, grid_rows, keep: int) -> Clos
     return ClosestPointFit(z, w, sel, theta, cost[sel])
 
 
-def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, ordered, cmu) -> Starts:
+def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, ordered, cmu, arc: bool = True) -> Starts:
     """Best-placed random shapes: ``Starts(x (keep, 9), theta (keep, n), mode (keep,), cost
     (keep,))`` in the normalised frame.
 
     Each shape's coupler curve is sampled once (``GRID`` points over its crank interval);
-    a placement assigns the targets crank angles spread by arc length (a phase, a span, a
-    direction), and is scored by the best similarity (or, with prescribed crank angles,
-    scale and translation) taking the curve points to the targets: closed form.  Stages:
-    ``shape_grid``, ``placement_positions``, ``placement_costs``, ``closest_point_fit``."""
+    a placement puts the targets at positions along it spread as they are along the targets
+    by arc length (a phase, a span, a direction), and is scored by the best similarity (or,
+    with prescribed crank angles, scale and translation) taking the curve points to the
+    targets: closed form.  The positions are fractions of the curve's arc length
+    (``arc_indices``, `arc`, on ``ARC_TARGETS`` of the targets) when the crank angles are free
+    and unordered, else of the crank's interval.  Stages: ``shape_grid``,
+    ``placement_positions``, ``placement_costs``, ``closest_point_fit``."""
     n = targets_n.size
     closed = curve == "closed"
     timed = alpha is not None
@@ -218,9 +244,11 @@ def placed_starts(targets_n, curve, alpha, mode_choices, n_shapes, keep, rng, or
     sub = np.unique(np.round(np.linspace(0, n - 1, min(n, 32))).astype(int))
     U, phis = placement_positions(sg, targets_n, alpha, closed, rng)
     Ts = targets_n[sub]
-    cands = placement_costs(sg, U, phis, sub, Ts, mode_choices)
-    costs = np.stack([cd.cost for cd in cands])  # (modes, m, P)
     icp = not (timed or ordered)
+    arc = icp and arc  # arc-length placements, then closest-point iterations (which take the crank angles from the curve)
+    coarse = np.unique(np.round(np.linspace(0, n - 1, min(n, ARC_TARGETS))).astype(int)) if arc else sub
+    cands = placement_costs(sg, U, phis, coarse, targets_n[coarse], mode_choices, arc)
+    costs = np.stack([cd.cost for cd in cands])  # (modes, m, P)
     flat = np.argsort(costs, axis=None)[: (2 * keep if icp else keep)]
     flat = flat[np.isfinite(costs.reshape(-1)[flat])]
     gi, i, j = np.unravel_index(flat, costs.shape)
