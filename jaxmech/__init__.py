@@ -4,7 +4,7 @@ Positions by a batched Newton solve of the loop-closure equations; every derivat
 (velocities, accelerations, torques, sensitivities) by the implicit function theorem.
 """
 
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib import metadata as _metadata
 
 from .actuators import DCMotor as DCMotor
 from .actuators import HydraulicCylinder as HydraulicCylinder
@@ -66,11 +66,13 @@ _LAZY = {"Linkage": "linkage", "load_linkage": "linkage", "drawing_from_lengths"
 
 
 def __getattr__(name):
-    """The lazily loaded names (``_LAZY``), and the deprecated ones: ``jaxmech.implicit_root``
+    """The documented packages and the lazily loaded names (``_LAZY``), and the deprecated ones: ``jaxmech.implicit_root``
     is ``jaxmech.implicit_positions``."""
-    if name in _LAZY:
-        import importlib
+    import importlib
 
+    if name in _PACKAGES:  # a documented package, loaded on first use (jaxmech.design, ...)
+        return importlib.import_module(f".{name}", __name__)
+    if name in _LAZY:
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
         globals()[name] = value
         return value
@@ -83,10 +85,35 @@ def __getattr__(name):
 
 
 try:
-    __version__ = _version("jaxmech")
-except PackageNotFoundError:  # running from a source tree
+    __version__ = _metadata.version("jaxmech")
+except _metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+
+#: The public face: one name per job, the rest in the documented packages.
+__all__ = [
+    # mechanisms and solving
+    "Mechanism", "Vars", "cis", "SolverOptions", "Solution", "Status", "status_counts", "status_message",
+    "solve", "solve_one", "solve_stroke", "implicit_positions",
+    # motion
+    "ConstantSpeed", "Ramp", "SmoothStart", "Samples", "Motion", "motion", "stroke_kinematics",
+    "input_derivatives", "time_derivatives",
+    # models and dynamics
+    "Model", "Body", "Gravity", "PointForce", "Moment", "Axial", "Potential", "Revolute", "Prismatic", "Slot",
+    "Actuator", "InverseDynamics", "Equilibrium", "Trajectory", "DynStatus", "dyn_status_message",
+    "inverse_dynamics", "inverse_dynamics_at", "statics", "equilibrium", "forward_dynamics",
+    "mass_matrix", "generalized_forces", "kinetic_energy", "potential_energy",
+    # actuators
+    "DCMotor", "HydraulicCylinder", "ScrewJack", "LinearSpring", "SMAWire",
+    # linkages from a drawing
+    "Linkage", "load_linkage", "drawing_from_lengths",
+    # the compile cache (opt-in)
+    "enable_compile_cache",
+]
+
+#: The documented packages, listed by ``dir(jaxmech)`` beside ``__all__`` (the library's
+#: internal modules stay importable by their full names, but are not part of its face).
+_PACKAGES = ("actuators", "design", "dynamics", "linkage", "scenes", "sweep")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted({*__all__, *_PACKAGES, "__version__"})

@@ -234,3 +234,18 @@ def test_the_wall_clock_rule_sees_what_it_should():
     assert wall_clock_asserts("t = time.time()\nassert t < 5\n")
     assert wall_clock_asserts("elapsed = run()\nassert elapsed < 120\n")
     assert not wall_clock_asserts("x = f()\nassert x < 3\n")
+
+
+def test_the_public_face_is_small_and_shows_no_internal_module():
+    """``jaxmech.__all__``: at most 60 names, each there; ``dir(jaxmech)``: those, the
+    documented packages and ``__version__``, no internal module and no stray import."""
+    import types
+
+    import jaxmech
+
+    assert len(jaxmech.__all__) <= 60 and len(set(jaxmech.__all__)) == len(jaxmech.__all__)
+    assert all(hasattr(jaxmech, n) for n in jaxmech.__all__)
+    shown = [n for n in dir(jaxmech) if not n.startswith("__")]
+    modules = {n for n in shown if isinstance(getattr(jaxmech, n), types.ModuleType)}
+    assert modules == {"actuators", "design", "dynamics", "linkage", "scenes", "sweep"}, modules
+    assert set(shown) - modules == set(jaxmech.__all__)
