@@ -54,6 +54,7 @@ def _random_shapes(rng, m, rotatable_fraction, cmu):
 
 GRID = 128  #: samples per random shape's coupler curve when placing it on the targets
 ARC_TARGETS = 12  #: targets (evenly spread along the list) an arc-length placement is scored on
+ARC_LEVELS = 1024  #: steps of arc length (a curve's whole) at which ``arc_indices`` tabulates its nearest sample
 
 
 class Starts(NamedTuple):
@@ -147,13 +148,16 @@ def arc_indices(C, full, V):
     m = C.shape[0]
     seg = np.nan_to_num(np.abs(np.diff(C, axis=1, append=C[:, :1])))  # (m, GRID): chord g -> g + 1
     seg[:, -1] = np.where(full, seg[:, -1], 0.0)
-    cum = np.concatenate([np.zeros((m, 1)), np.cumsum(seg, axis=1)], axis=1)  # (m, GRID + 1)
-    cum = cum / np.maximum(cum[:, -1:], 1e-300) + 2.0 * np.arange(m)[:, None]  # rows apart: one search for all
-    want = V.reshape(m, -1) + 2.0 * np.arange(m)[:, None]
-    g = np.searchsorted(cum.reshape(-1), want.reshape(-1)).reshape(m, -1) - (GRID + 1) * np.arange(m)[:, None]
-    lo = np.clip(g - 1, 0, GRID)
-    nearer = np.take_along_axis(cum, np.clip(g, 0, GRID), 1) - want < want - np.take_along_axis(cum, lo, 1)
-    return np.mod(np.where(nearer, g, lo), GRID).reshape(V.shape)
+    cum = np.cumsum(seg, axis=1)
+    cum = np.concatenate([np.zeros((m, 1)), cum / np.maximum(cum[:, -1:], 1e-300)], axis=1)  # (m, GRID + 1) in [0, 1]
+    # a table of the nearest sample at 1/ARC_LEVELS steps of arc: each sample marks the level
+    # nearest it, the levels between take the last sample marked (its sample or the one before)
+    table = np.full((m, ARC_LEVELS + 1), -1)
+    rows = np.repeat(np.arange(m), GRID + 1)
+    table[rows, np.rint(cum * ARC_LEVELS).astype(int).reshape(-1)] = np.tile(np.arange(GRID + 1), m)
+    table = np.maximum.accumulate(table, axis=1)
+    lv = np.rint(np.clip(V, 0.0, 1.0) * ARC_LEVELS).astype(int).reshape(m, -1)
+    return np.mod(np.take_along_axis(table, lv, axis=1), GRID).reshape(V.shape)
 
 
 def placement_costs(sg: ShapeGrid, U, phis, sub, Ts, mode_choices, arc: bool = False) -> list:
