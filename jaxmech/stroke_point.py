@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .branches import branch_value, has_branch, on_branch
-from .linalg import cond1, small_max, small_norm, solve_blocks, where
+from .linalg import cond1, inv_small, small_max, small_norm, solve_blocks, where
 from .mechanism import Mechanism
 from .newton import NewtonResult, coord_scales, evaluator, newton, per_lane
 from .options import SolverOptions, tolerances
@@ -24,7 +24,7 @@ from .status import Status
 from .structure import blocks
 from .xla import unfused
 
-__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "multistart", "fresh_starts", "score", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
+__all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "multistart", "fresh_starts", "across_fold", "score", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 
 
 # --------------------------------------------------------------------------- predictor
@@ -205,7 +205,7 @@ def score(status):
 
 
 def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, target, inputs_finite: bool = False,
-               skip=None, after_stall=None, budget=None) -> tuple[NewtonResult, jax.Array]:
+               skip=None, after_stall=None, budget=None, fold=None) -> tuple[NewtonResult, jax.Array]:
     """``newton.newton`` from ``starts[j]`` (``(S, m)``) with the step cap ``caps[j]``, for
     ``j = 0 .. count - 1`` (``count`` may be traced) one after another until a root on the
     requested branch (``target``) is found.  One call site of the kernel, in a
@@ -216,7 +216,9 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
     (traced bool): no start is run (the lane's answer is not wanted).  ``after_stall``
     (``(S,)`` bools): start ``j`` is run only where start ``j - 1`` did not stall
     (``INFEASIBLE``: a least-squares minimum above tolerance, which a shorter step from the
-    same pose reaches again).  ``budget``: each start's iterations (``newton.newton``'s).
+    same pose reaches again).  ``fold`` (``(S,)`` bools, may be traced): start ``j`` is
+    instead ``across_fold`` of the best root so far, run only where that root is on
+    another branch.  ``budget``: each start's iterations (``newton.newton``'s).
     Returns ``(best NewtonResult, index of its start)``."""
     dtype = starts.dtype
     last = starts.shape[0] - 1
@@ -230,7 +232,12 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
         j, best, best_score, j_best, stalled = carry
         k = jnp.clip(j, 0, last)
         run = wanted(carry) & ~(after[k] & stalled)
-        res = newton(mech, opts, u, p, starts[k], target, caps[k].astype(dtype), skip=~run, inputs_finite=inputs_finite, budget=budget)
+        start = starts[k]
+        if fold is not None:
+            mirrored = fold[k]
+            run = run & (~mirrored | (best_score == 1))
+            start = where(mirrored & (best_score == 1), across_fold(mech, best.q, u, p), start)
+        res = newton(mech, opts, u, p, start, target, caps[k].astype(dtype), skip=~run, inputs_finite=inputs_finite, budget=budget)
         take = run & (score(res.status) > best_score)
         pick = lambda a, b: where(take, a, b)  # noqa: E731
         stalled = where(run, res.status == Status.INFEASIBLE, stalled)
@@ -260,3 +267,34 @@ def fresh_starts(mech: Mechanism, opts: SolverOptions, ref, p) -> tuple[jax.Arra
     caps = np.full(STARTS + 2, opts.max_step)
     caps[1] = 0.1 * opts.max_step
     return jnp.concatenate([ref[None], ref[None], table]), jnp.asarray(caps, dtype)
+
+
+#: Inverse iterations for the near-null vectors of a root's Jacobian (``across_fold``):
+#: the error shrinks by ``sigma_min / sigma_2`` each, a small ratio at a toggle.
+FOLD_ITERATIONS = 6
+
+
+def across_fold(mech: Mechanism, q, u, p):
+    """The other root across a fold from the root ``q`` (``(m,)``): where a loop is near a
+    toggle, its two assembly modes are two roots ``q`` and ``q + t v`` on either side of
+    the fold, ``v`` the Jacobian's near-null right vector.  On the quadratic model of the
+    scaled residual along ``v``, projected on the near-null left vector ``w``
+    (``w' Phi(q + t v) = sigma t + c t^2 / 2``, ``sigma = w' J v``, ``c = w' Phi''[v, v]``)
+    the other root is ``t = -2 sigma / c``.  A start for the requested branch where Newton
+    from every nearby pose lands on the other one (a stretch of stroke between two gaps,
+    a point or two long, sits next to a toggle).  ``q`` itself where the model has no
+    finite root.  No LAPACK: the vectors by inverse iteration on the block inverse."""
+    dtype = q.dtype
+    evaluate, s = evaluator(mech, u, p, dtype)
+    _, js = evaluate(q)
+    inv = inv_small(js, blocks(mech))
+    v = w = jnp.asarray(1.0 + 0.1 * np.arange(mech.m), dtype)  # deterministic, not orthogonal to a null vector
+    for _ in range(FOLD_ITERATIONS):  # on J'J and JJ' (singular vectors, not J's eigenvectors)
+        v, w = inv @ (inv.T @ v), inv.T @ (inv @ w)
+        v, w = v / small_norm(v), w / small_norm(w)
+    R = mech.residual_scales(p, dtype)
+    along = lambda t: mech.residual(q + t * v * s, u, p) / R  # noqa: E731
+    curve = jax.jvp(lambda t: jax.jvp(along, (t,), (jnp.ones((), dtype),))[1], (jnp.zeros((), dtype),), (jnp.ones((), dtype),))[1]
+    t = -2.0 * jnp.dot(w, js @ v) / jnp.dot(w, curve)
+    other = q + t * v * s
+    return where(jnp.all(jnp.isfinite(other)), other, q)

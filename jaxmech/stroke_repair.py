@@ -26,6 +26,11 @@ program holds one copy of the Newton kernel:
    and, where that one did not stall (``INFEASIBLE``), at a tenth of it.  A point they
    converge next to failed ones (a stretch between two gaps) starts fill steps again.
 
+Every phase's starts end with one from across the fold next to a root the phase found only
+on another branch (``stroke_point.across_fold``, run only then): a stretch a point or two
+long between two gaps sits next to a loop's toggle, where Newton from every pose nearby can
+land on the loop's other assembly mode.
+
 A point solved before keeps the better answer (``stroke_point.score``).  At most
 ``ROUNDS`` two-sided phases run.  Angles stay continuous as numbers (``unwrap``): each
 repaired pose is moved by whole turns, in stroke order, to within half a turn of the
@@ -142,21 +147,32 @@ def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, mode
     dtype = pts.q.dtype
     cap = jnp.asarray(opts.max_step, dtype)
     # the two-sided table: left, left at a tenth of the cap (after a left start that did not
-    # stall), right, likewise; padded to the fresh table's length
-    two_caps = jnp.concatenate([jnp.stack([cap, 0.1 * cap, cap, 0.1 * cap]), jnp.full((STARTS - 2,), cap)])
-    two_after = jnp.asarray([False, True, False, True] + [False] * (STARTS - 2))
+    # stall), right, likewise, where the right is near; then, in every table, a start from
+    # the other side of the fold next to a root on another branch (``across_fold``, run only
+    # where one was found: a stretch between two gaps lies next to a toggle, where Newton
+    # from every nearby pose can land on the other mode).  Padded to STARTS + 3 rows.
+    pad = STARTS - 2
+    two_caps = jnp.concatenate([jnp.stack([cap, 0.1 * cap, cap, 0.1 * cap, cap]), jnp.full((pad,), cap)])
+    two_after = jnp.asarray([False, True, False, True, False] + [False] * pad)
+    fresh_fold = jnp.asarray([False] * (STARTS + 2) + [True])
 
     fresh, cont = mode == FRESH, mode == CONTINUE
 
     def one(u_, p_, b_, q_l, q_r, has_r, g_, live):
         f_starts, f_caps = fresh_starts(mech, opts, q_l, p_)
-        t_starts = jnp.concatenate([jnp.stack([where(cont, g_, q_l), q_l, q_r, q_r]), jnp.broadcast_to(q_l, (STARTS - 2, m))])
+        f_starts, f_caps = jnp.concatenate([f_starts, q_l[None]]), jnp.concatenate([f_caps, cap[None]])
+        both = jnp.stack([where(cont, g_, q_l), q_l, q_r, q_r, q_l])
+        left = jnp.stack([where(cont, g_, q_l), q_l, q_l, q_l, q_l])  # its third row the fold's
+        t_starts = jnp.concatenate([where(has_r, both, left), jnp.broadcast_to(q_l, (pad, m))])
+        t_fold = jnp.concatenate([where(has_r, jnp.asarray([False, False, False, False, True]), jnp.asarray([False, False, True, False, False])),
+                                  jnp.zeros((pad,), bool)])  # fmt: skip
         starts = where(fresh, f_starts, t_starts)
         caps = where(fresh, f_caps, two_caps)
         after = two_after & ~fresh
-        count_ = where(fresh, STARTS + 2, where(cont, 1, where(has_r, 4, 2)))
+        fold = where(fresh, fresh_fold, t_fold & ~cont)
+        count_ = where(fresh, STARTS + 3, where(cont, 1, where(has_r, 5, 3)))
         budget = where(cont, FILL_ITERATIONS, opts.max_iterations)
-        return multistart(mech, opts, u_, p_, starts, caps, count_, b_, True, skip=~live, after_stall=after, budget=budget)[0]
+        return multistart(mech, opts, u_, p_, starts, caps, count_, b_, True, skip=~live, after_stall=after, budget=budget, fold=fold)[0]
 
     def solve(k, pts_):
         idx = jax.lax.dynamic_slice_in_dim(order, k * group, group)

@@ -21,7 +21,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from hypothesis import HealthCheck, Phase, assume, given, settings  # noqa: E402
+from hypothesis import HealthCheck, Phase, assume, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
@@ -196,6 +196,10 @@ def test_slider_crank_strokes_across_gaps(a, b, e, t0, sign):
     t0=st.floats(0, 2 * np.pi),
     signs=st.tuples(st.sampled_from([1.0, -1.0]), st.sampled_from([1.0, -1.0])),
 )
+# a one-point island: the first loop closes at point 3 alone between two gaps, 0.056 from its
+# toggle, where Newton from every pose nearby landed on the loop's other mode (BRANCH)
+@example(ls=[1.7078881681803042, 0.9, 0.75, 1.6143521530878466, 1.989833601230989, 1.701127240615796, 2.9385850421650175],
+         h=2.091149283418641, k=0.75, gamma=-6.103515625e-05, t0=6.050165264851943, signs=(-1.0, 1.0))
 def test_sixbar_strokes_across_gaps(ls, h, k, gamma, t0, signs):
     p = dict(zip("abcdefg", ls), h=h, k=k, gamma=gamma)
     us = t0 + np.linspace(0.0, 4 * np.pi, N)
