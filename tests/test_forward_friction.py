@@ -4,9 +4,13 @@ independent model written here in numpy and integrated by ``scipy.integrate.solv
 damping at its pivot, ``J_G alpha = (O - G) x F + M_f`` with the pin force
 ``F = m (a_G - g)`` and the friction moment ``M_f = -mu r |F| tanh(w / (width W)) - c w``:
 ``|F|`` depends on ``alpha``, so every evaluation of the acceleration solves that scalar
-equation (``brentq`` to round-off).  And: the mechanical energy decreases at every step of a
-run swinging back and forth (friction only dissipates); the derivative of the final angle
-in the friction coefficient against central differences; the speed scale asked for.
+equation (``brentq`` to round-off).  And: the offset slider-crank of
+``test_joint_friction`` (friction at its three pins and in its guide) falling from rest under
+gravity, its per-body Newton-Euler equations solved at every evaluation for the joints'
+forces and the crank's acceleration together (the crank's torque zero), against the same
+run; the mechanical energy decreases at every step of a run swinging back and forth
+(friction only dissipates); the derivative of the final angle in the friction coefficient
+against central differences; the speed scale asked for.
 """
 
 import jax
@@ -20,6 +24,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from scipy.optimize import brentq  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
+import test_joint_friction as SC  # noqa: E402
 from jaxmech import dynamics as D  # noqa: E402
 
 L, MASS, G = 0.3, 1.0, 9.81  # the bar O-A (m), its mass (kg), gravity (m/s^2)
@@ -71,6 +76,40 @@ def test_pendulum_with_pin_friction_against_scipy_radau():
     # the run's accelerations are the numpy model's at the run's own states
     u, ud, udd = (np.asarray(x)[:, 0] for x in (tr.u, tr.u_dot, tr.u_ddot))
     np.testing.assert_allclose(udd[::40], [acceleration(a, b) for a, b in zip(u[::40], ud[::40])], rtol=0, atol=1e-10)
+
+
+def slider_crank_acceleration(th, om, width, scale):
+    """The crank's angular acceleration of ``test_joint_friction``'s slider-crank released (no
+    torque on the crank): its nine body equations with the friction loads, in the joints'
+    forces and the acceleration, by Newton's method from the frictionless solution."""
+    sg = {k: np.tanh(v / (width * scale[k])) for k, v in SC.speeds(SC.motion_at(th, om, 0.0)).items()}
+    m0, r0 = SC.linear_system(SC.motion_at(th, om, 0.0))
+    _, r1 = SC.linear_system(SC.motion_at(th, om, 1.0))  # the equations are affine in the acceleration
+    A = np.column_stack([m0[:, :8], r0 - r1])  # unknowns: F_O, F_A, F_B, N, the guide's moment, alpha
+    friction = lambda z: SC.friction_loads(np.append(z[:8], 0.0), sg)  # noqa: E731
+    z = np.linalg.solve(A, r0)
+    jac = A + np.stack([(friction(z + e) - friction(z - e)) / 2e-7 for e in 1e-7 * np.eye(9)], axis=1)
+    for _ in range(60):
+        r = A @ z + friction(z) - r0
+        if np.max(np.abs(r)) <= 1e-14 * np.max(np.abs(r0)):
+            return z[8]
+        z = z - np.linalg.solve(jac, r)
+    raise AssertionError("the numpy friction Newton did not converge")
+
+
+def test_slider_crank_with_friction_everywhere_against_scipy_radau(monkeypatch):
+    monkeypatch.setattr(SC, "LOAD", 0j)  # gravity alone: the load on the block would fling it
+    width, scale = 0.1, {"O": 10.0, "A": 10.0, "B": 10.0, "guide": 1.0}  # rad/s at the pins, m/s in the guide
+    # to 0.18 s: beyond, the forces at O and A pass near zero and |F|'s kink costs both integrators accuracy
+    t_end = 0.18
+    want = solve_ivp(lambda t, y: [y[1], slider_crank_acceleration(*y, width, scale)], (0.0, t_end), [SC.TH0, 0.0],
+                     method="Radau", rtol=1e-12, atol=1e-12).y[:, -1]
+    lk = SC.linkage(friction={**SC.FRICTION, "width": width})
+    tr = lk.forward_dynamics(h=t_end / 100, steps=100, friction_speed={"O": 10.0, "A": 10.0, "B": 10.0, "block_B": 1.0})
+    assert int(tr.status) == D.DynStatus.OK, tr.message()
+    got = np.array([float(tr.u[-1, 0]), float(tr.u_dot[-1, 0])])
+    assert np.all(np.abs(got - want) <= 1e-10), got - want  # observed 9e-13 rad, 9e-12 rad/s
+    assert want[0] < SC.TH0 - 0.35 and want[1] < -5.0  # it falls (rad, rad/s)
 
 
 def test_friction_dissipates_energy_at_every_step():
