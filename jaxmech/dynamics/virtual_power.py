@@ -25,6 +25,7 @@ normal force in newtons the same way.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -207,6 +208,10 @@ def driving_effort(model: Model, st: LoadedState, dq_du):
     return jnp.where(st.ok, tau, jnp.nan)
 
 
+# The four model functions of the public face are jitted (the model static): called eagerly,
+# JAX would otherwise run them operation by operation, compiling each (a slider-crank's first
+# eager mass_matrix took 86 s, each later one 3.7 s); inside a trace they inline as usual.
+@functools.partial(jax.jit, static_argnums=0, static_argnames=("inertia",))
 def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: bool = True, q_dot=None, q_ddot=None):
     """Driving generalized forces and constraint multipliers at one solved state.
 
@@ -233,6 +238,7 @@ def generalized_forces(model: Model, q, u, u_dot, u_ddot, p, t=0.0, *, inertia: 
     return balance(model, st)
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def mass_matrix(model: Model, q, u, p):
     """Generalized mass matrix in the inputs, ``(dof, dof)`` (kg, kg m, kg m^2):
     ``M = sum m (dr_G/du)^T (dr_G/du) + J (dphi/du)^T (dphi/du)``, with ``dq/du`` implicit."""
@@ -254,6 +260,7 @@ def mass_matrix(model: Model, q, u, p):
     return jnp.where(ok, M, jnp.nan)
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def kinetic_energy(model: Model, q, u, u_dot, p):
     """``T = sum m |v_G|^2 / 2 + J omega^2 / 2`` (J) at one solved state."""
     mech = model.mechanism
@@ -268,6 +275,7 @@ def kinetic_energy(model: Model, q, u, u_dot, p):
     return jnp.where(ok, jnp.asarray(T, q.dtype), jnp.nan)
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def potential_energy(model: Model, q, u, p, t=0.0):
     """Gravity and ``Potential`` loads' energy (J) at one state (``Axial`` laws excluded:
     a general law has no energy; use ``Potential`` for a spring you want counted)."""
