@@ -307,3 +307,27 @@ def test_a_toggle_to_toggle_arc_is_found_to_its_noise():
     assert max(_mu(p, np.array([lo0 + 1e-9, hi0 - 1e-9]))) < 0.1  # its crank's ends are toggles
     (lo, hi), = crank_intervals(p, 5.0)
     _search_to_the_noise_floor(p, _noisy(p, lo + (hi - lo) * (np.arange(30) + 0.5) / 30, 0), "open")
+
+
+def test_arc_length_placement_and_nearest_points():
+    """``arc_indices`` finds the samples at fractions of arc length on a circle drawn at very
+    uneven speed (to within one sample); ``closest_angles`` moves a target held on the far
+    branch of the figure eight to the near one and never raises a start's cost."""
+    from jaxmech.design.synthesis_lsq import closest_angles
+    from jaxmech.design.synthesis_starts import GRID, arc_indices
+
+    g = np.arange(GRID) / GRID
+    turn = 2 * np.pi * (g + 0.12 * np.sin(2 * np.pi * g))  # the crank's angle: uneven along the circle
+    idx = arc_indices(np.exp(1j * turn)[None], np.array([True]), np.array([[[0.0, 0.25, 0.5, 0.75]]]))[0, 0]
+    assert np.all(np.abs(turn[idx] / (2 * np.pi) - [0.0, 0.25, 0.5, 0.75]) <= 1.0 / GRID)
+
+    p = CRUNODE  # in its own frame: centroid 0, unit lengths as they are
+    x = np.array([[p["x0"], p["y0"], p["phi"], *np.log([p[k] for k in "abcd"]), p["px"], p["py"]]])
+    th = np.linspace(0, 2 * np.pi, 12, endpoint=False)[None]
+    tg = _pins(p, th[0] + p["phi"])[2]
+    wrong = th.copy()
+    wrong[0, 5] += np.pi  # one target held half a turn away
+    held = abs(_pins(p, wrong[0, 5] + p["phi"])[2] - tg[5]) ** 2
+    new_th, cost = closest_angles(x, wrong, np.array([p["mode"]]), np.stack([tg.real, tg.imag], 1), "closed", 1.0)
+    assert cost[0] < 1e-3 * held and abs(np.angle(np.exp(1j * (new_th[0, 5] - th[0, 5])))) < 0.01
+    assert np.all(np.abs(np.angle(np.exp(1j * (np.delete(new_th, 5) - np.delete(th, 5))))) < 1e-9)  # the others stay
