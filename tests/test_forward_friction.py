@@ -10,7 +10,9 @@ gravity, its per-body Newton-Euler equations solved at every evaluation for the 
 forces and the crank's acceleration together (the crank's torque zero), against the same
 run; the mechanical energy decreases at every step of a run swinging back and forth
 (friction only dissipates); the derivative of the final angle in the friction coefficient
-against central differences; the speed scale asked for.
+against central differences; a pendulum whose pin friction admits no acceleration at all
+(the numpy balance keeps one sign) stopping with ``DynStatus.FRICTION``; the speed scale
+asked for.
 """
 
 import jax
@@ -37,21 +39,18 @@ LK = jm.Linkage(points={"O": (0, 0), "A": (L, 0)}, links={"arm": "O A"}, ground=
 
 
 # --------------------------------------------------------------------------- numpy model
-def acceleration(th, om, mu=MU):
-    """The bar's angular acceleration (rad/s^2) at angle `th` and rate `om`: the moment balance
-    about its centre with the pin force ``F(alpha) = m (a_G(alpha) - g)`` and friction."""
-    e = np.exp(1j * th)
+def residual(al, th, om, mu=MU, rpin=RPIN):
+    """The bar's moment balance about its centre at angular acceleration `al` (rad/s^2), angle
+    `th` and rate `om`, with the pin force ``F(alpha) = m (a_G(alpha) - g)`` and friction."""
+    f = MASS * C * np.exp(1j * th) * (1j * al - om * om) + 1j * MASS * G  # the ground's force on the bar at O (N)
+    friction = -mu * rpin * np.abs(f) * np.tanh(om / (WIDTH * W)) - CV * om
+    return JG * al - np.imag(np.conj(-C * np.exp(1j * th)) * f) - friction
 
-    def pin_force(al):  # the ground's force on the bar at O (N, complex)
-        return MASS * C * e * (1j * al - om * om) + 1j * MASS * G
 
-    def residual(al):
-        f = pin_force(al)
-        friction = -mu * RPIN * abs(f) * np.tanh(om / (WIDTH * W)) - CV * om
-        return JG * al - np.imag(np.conj(-C * e) * f) - friction
-
+def acceleration(th, om):
+    """The bar's angular acceleration (rad/s^2): the root of ``residual``."""
     free = -MASS * G * C * np.cos(th) / (JG + MASS * C * C)
-    return brentq(residual, free - 1e3, free + 1e3, xtol=1e-14, rtol=4 * np.finfo(float).eps, maxiter=500)
+    return brentq(residual, free - 1e3, free + 1e3, args=(th, om), xtol=1e-14, rtol=4 * np.finfo(float).eps, maxiter=500)
 
 
 def reference(t_end):
@@ -130,6 +129,16 @@ def test_final_angle_is_differentiable_in_the_friction_coefficient():
     e = 1e-4  # central differences, error O(e^2)
     fd = (float(final(MU + e)) - float(final(MU - e))) / (2 * e)
     assert abs(fd) > 0.1 and abs(g - fd) <= 1e-7 * abs(fd), (g, fd)  # observed 5e-10 relative
+
+
+def test_a_pendulum_jammed_by_friction_stops_with_its_status():
+    # a pin of radius 0.5 m with mu = 1: friction grows with |alpha| faster than inertia does,
+    # and no acceleration balances the bar (the numpy residual keeps one sign: Painleve's paradox)
+    al = np.linspace(-1e5, 1e5, 200001)
+    assert np.all(residual(al, 0.0, 5.0, 1.0, 0.5) > 0)
+    tr = LK.forward_dynamics(h=1e-3, steps=5, u0=0.0, u_dot0=5.0, p={"mu_O": 1.0, "rpin_O": 0.5}, friction_speed=W)
+    assert int(tr.status) == D.DynStatus.FRICTION and float(tr.t_stop) == 0.0
+    assert "friction jams the linkage" in tr.message() and np.all(np.isnan(np.asarray(tr.u[1:])))
 
 
 def test_the_speed_scale_is_asked_for():
