@@ -367,8 +367,9 @@ def reassigned(pb: Problem, pool: Pool, count: int = 8, rounds: int = 3, iterati
     """A polish on the exact distance: the best `count` starts' targets moved to their nearest
     points on the design's curve (``closest_angles``: the least squares can stop with a target
     held on the wrong branch of a curve that crosses itself, or on the wrong side of a cusp),
-    then Levenberg-Marquardt again; kept where the error drops, `rounds` times.  Free crank
-    angles only (``pb.alpha`` None, not ``pb.ordered``); changes `pool` in place."""
+    then Levenberg-Marquardt again where one moved; kept where the error drops, `rounds`
+    times.  Free crank angles only (``pb.alpha`` None, not ``pb.ordered``); changes `pool` in
+    place."""
     X, TH, M, cost, its = pool
     if pb.alpha is not None or pb.ordered:
         return pool
@@ -378,6 +379,10 @@ def reassigned(pb: Problem, pool: Pool, count: int = 8, rounds: int = 3, iterati
         if idx.size == 0:
             break
         th, _ = closest_angles(X[idx], TH[idx], M[idx], pb.tg, pb.curve, pb.cmu)
+        moved = np.any(th != TH[idx], axis=1)  # only where a target found a nearer point
+        idx, th = idx[moved], th[moved]
+        if idx.size == 0:
+            break
         x, th, c, it_, _ = levenberg_marquardt(X[idx].copy(), th, M[idx], pb.tg, None, pb.curve, False, pb.max_size, pb.cmu,
                                                iterations)
         better = np.isfinite(c) & (c < cost[idx] * (1 - 1e-9))
