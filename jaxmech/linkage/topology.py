@@ -87,7 +87,9 @@ class Built:
       (``("x"|"y", point)``, ``("len", entry, point)``, ``("ang", direction, entry, point)``,
       ``("frame", body, entry, point)``, ``("guide"|"slot", name, body)``, ``("radius", pin,
       centre)``); `coords`, `inputs`: ``{name: recipe}`` at the drawing.
-    - `frames`: per body, ``(entry, direction)`` points (direction None for a block).
+    - `frames`: per body, the two points its angle is measured between, as drawn (the link's
+      first listed point to its second where the tree enters it through the second; else
+      ``(entry, direction)``; direction None for a block).
     - `virtual`: ``{virtual point: (body, what)}``: centres of mass, guide and slot bases.
     - `joints`: per moving link, the points that join it to another body (mass defaults).
     """
@@ -206,6 +208,15 @@ class _Builder:
         centre = self.slots[e.point][1]
         return centre if centre else self._virtual(f"{e.point}_on_{body}", body, ("at", e.point))
 
+    @functools.lru_cache(maxsize=None)  # noqa: B019
+    def flipped(self, body: str) -> bool:
+        """Whether the tree enters a link through its second listed point: its angle is then
+        measured, as drawn, from its first listed point to that one (the entry's frame,
+        entry to first point, is half a turn from it: its link vectors carry a minus sign).
+        A driver keeps its angle about its ground pivot."""
+        pts = self.links.get(body, ())
+        return body not in self.blocks and body not in self.top.drivers and len(pts) >= 2 and self.entry(body) == pts[1]
+
     def direction(self, body: str):
         if body in self.blocks:
             return None
@@ -260,11 +271,12 @@ class _Builder:
         length = f"len_{entry}_{x}"
         self.recipes[length] = ("len", entry, x)
         d = self.direction(body)
+        sign = -1 if self.flipped(body) else 1
         if d == x:
-            return base + (Term(1, length, self.theta(body)),)
+            return base + (Term(sign, length, self.theta(body)),)
         ang = f"ang_{d}_{entry}_{x}" if d is not None else f"ang_{body}_{entry}_{x}"
         self.recipes[ang] = ("ang", d, entry, x) if d is not None else ("frame", body, entry, x)
-        return base + (Term(1, length, self.theta(body) + ((1, ang),)),)
+        return base + (Term(sign, length, self.theta(body) + ((1, ang),)),)
 
     def closing(self, e: _Edge) -> tuple:
         if e.kind == "revolute":
@@ -468,7 +480,9 @@ def build(top: Topology) -> Built:
             f"left {'(add a driver or a joint)' if free > 0 else '(it is over-constrained: remove a link or a driver)'}")
     mech = _mechanism(b, loops, coords, inputs)
     model = _model(b, mech, names)
-    frames = {body: (b.entry(body), b.direction(body)) for body in b.bodies if body != GROUND}
+    # a body's angle is measured from the first point of its frame to the second
+    frames = {body: (b.direction(body), b.entry(body)) if b.flipped(body) else (b.entry(body), b.direction(body))
+              for body in b.bodies if body != GROUND}
     coord_recipes = {b.motion_of(body): ("travel",) if body in b.blocks else ("angle", body) for body in list(b.links) + list(b.acts)}
     coord_recipes.update({act: ("length", *pts) for act, pts in b.acts.items()})
     for pin, (_, centre) in b.slots.items():
