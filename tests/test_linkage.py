@@ -19,6 +19,8 @@ jax.config.update("jax_enable_x64", True)
 
 import functools  # noqa: E402
 
+import jax.numpy as jnp  # noqa: E402
+
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -495,3 +497,23 @@ def test_hand_written_fourbar_model_matches_linkage():
         for x, a, b in rig.joints:
             ours = F_ne[x] if (a, b) == hand[x] else -F_ne[x]
             assert abs(complex(res.joints[x][k]) - ours) <= RTOL * scale[k], (k, x)
+
+
+def test_link_angles_are_measured_as_drawn_whatever_the_tree():
+    """``theta_<link>`` runs from the link's first listed point to its second at every sample,
+    also where the equations reach the link through its second point (``"link6": "F O6"``,
+    ``"coupler": "B A"``): checked against the solved points themselves."""
+    pts = {"O2": (0, 0), "A": (0.5, 0.866), "B": (3.15, 2.0), "O4": (3.5, 0), "E": (4.6, 1.6), "F": (6.2, 3.2), "O6": (7.0, 1.0)}
+    links = {"crank": "O2 A", "coupler": "B A", "rocker": "O4 B E", "link5": "E F", "link6": "F O6"}
+    lk = jm.Linkage(points=pts, links=links, ground="O2 O4 O6", driver="crank")
+    s = jnp.linspace(0.0, 2 * jnp.pi, 25)
+    res = lk.inverse_dynamics(jm.Samples(1.05 + 0.8 * jnp.sin(s), 0.8 * jnp.cos(s), -0.8 * jnp.sin(s)))
+    assert np.all(np.asarray(res.status) == jm.Status.CONVERGED)
+    for link, names in links.items():
+        if link == "crank":
+            continue
+        a, b = names.split()[:2]
+        at = lambda x: np.asarray(res.points[x][0]) if x in res.points else complex(*pts[x])  # noqa: E731
+        want = np.angle(at(b) - at(a))
+        got = np.asarray(res.q[:, lk.mechanism.coords.index(f"theta_{link}")])
+        np.testing.assert_allclose(np.angle(np.exp(1j * (got - want))), 0.0, atol=1e-12, err_msg=link)
