@@ -15,7 +15,9 @@ emitters, for the same values: the four-bar's stroke program compiles in 0.59 s 
 the library's programs with ``COMPILER_OPTIONS``, which turn them off: a field of XLA's
 debug options that only the CPU compiler reads.  Other backends refuse it (jax 0.11.2 on an
 H200: ``INVALID_ARGUMENT: No such compile option``), so on them the library's programs
-compile with the backend's defaults (``_on_cpu``).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
+compile with the backend's defaults (``_on_cpu``).  A CPU compiler that no longer knows the
+option (jaxlib 0.11.2 on a CPU refuses it the same way) is found by a tiny program it
+compiles once: then this process compiles with the defaults (``_with_options``).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
 statuses, derivatives and points) comes out the same either way, to rounding.
 
 ``jit(..., stored=True)`` marks a program whose top-level calls (concrete arguments) go
@@ -74,7 +76,7 @@ class _Jitted:
         functools.update_wrapper(self, nested)
 
     def __call__(self, *args, **kwargs):
-        if not _on_cpu() or any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+        if not _with_options() or any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
             return self._nested(*args, **kwargs)
         try:
             return self._top(*args, **kwargs)
@@ -84,7 +86,7 @@ class _Jitted:
             return self._nested(*args, **kwargs)
 
     def __getattr__(self, name):  # lower, trace, eval_shape...: the top-level function's
-        return getattr(self._top if _on_cpu() else self._nested, name)
+        return getattr(self._top if _with_options() else self._nested, name)
 
 
 class _Stored:
@@ -107,6 +109,26 @@ class _Stored:
 
 def _on_cpu() -> bool:
     return jax.default_backend() == "cpu"
+
+
+@functools.cache
+def _accepted(backend: str, options: tuple) -> bool:
+    """Whether the default backend's compiler (`backend`, the cache's key) takes `options` (a
+    tiny program compiled once per process:
+    ~10 ms; jaxlib 0.11.2's CPU compiler refuses ``xla_cpu_use_fusion_emitters``)."""
+    try:
+        jax.jit(lambda x: x + 1, compiler_options=dict(options)).lower(jnp.zeros((), jnp.int32)).compile()
+    except Exception as err:  # noqa: BLE001 - "INVALID_ARGUMENT: No such compile option"
+        if "compile option" not in str(err):
+            raise
+        return False
+    return True
+
+
+def _with_options() -> bool:
+    """Whether the library's top-level programs compile with ``COMPILER_OPTIONS``: on a CPU
+    whose compiler knows them."""
+    return _on_cpu() and _accepted(jax.default_backend(), tuple(sorted(COMPILER_OPTIONS.items())))
 
 
 def unfused(v):

@@ -98,3 +98,34 @@ def test_other_backends_compile_without_the_cpu_options(monkeypatch):
     monkeypatch.setattr(xla, "_on_cpu", lambda: True)  # on the CPU the options' program is the one called
     with pytest.raises(RuntimeError, match="No such compile option"):
         f(jnp.asarray(3.0))
+
+
+def test_a_cpu_compiler_that_refuses_the_options_compiles_with_its_defaults(tmp_path):
+    """jaxlib 0.11.2's CPU compiler refuses ``xla_cpu_use_fusion_emitters`` as the GPU's does
+    (every library program failed there): a compiler that does not know an option of
+    ``COMPILER_OPTIONS`` is found once, and the library's programs (a stroke, a scene's two
+    programs through the store) compile with its defaults and give the same statuses. Here
+    an option no compiler knows stands for it, in a new process with a store of its own."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = (
+        "import jax, numpy as np\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        "import jaxmech.xla as x\n"
+        "x.COMPILER_OPTIONS['xla_cpu_no_such_option_in_any_compiler'] = True\n"
+        "import jaxmech as jm\n"
+        "from jaxmech.scenes import run_scene\n"
+        "from jaxmech.scenes.classic import fourbar_mechanism\n"
+        "q, qd, qdd = jm.stroke_kinematics(fourbar_mechanism, np.linspace(0, 6.28, 37), dict(a=1.0, b=3.0, c=2.5, d=3.5), np.array([0.4, 1.7]))\n"
+        "r = run_scene('fourbar', points=37)\n"
+        "print(x._with_options(), jm.status_counts(q.status), jm.status_counts(r.motion.status))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "JAXMECH_COMPILE_CACHE": str(tmp_path), "PYTHONPATH": str(root)}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split("\n")[-2] == "False {'CONVERGED': 37} {'CONVERGED': 37}", out.stdout
