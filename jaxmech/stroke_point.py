@@ -234,9 +234,9 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
         run = wanted(carry) & ~(after[k] & stalled)
         start = starts[k]
         if fold is not None:
-            mirrored = fold[k]
+            mirrored = fold[k]  # run only from a root on another branch
             run = run & (~mirrored | (best_score == 1))
-            start = where(mirrored & (best_score == 1), across_fold(mech, best.q, u, p), start)
+            start = where(mirrored, across_fold(mech, best.q, u, p), start)
         res = newton(mech, opts, u, p, start, target, caps[k].astype(dtype), skip=~run, inputs_finite=inputs_finite, budget=budget)
         take = run & (score(res.status) > best_score)
         pick = lambda a, b: where(take, a, b)  # noqa: E731
@@ -288,10 +288,13 @@ def across_fold(mech: Mechanism, q, u, p):
     evaluate, s = evaluator(mech, u, p, dtype)
     _, js = evaluate(q)
     inv = inv_small(js, blocks(mech))
-    v = w = jnp.asarray(1.0 + 0.1 * np.arange(mech.m), dtype)  # deterministic, not orthogonal to a null vector
-    for _ in range(FOLD_ITERATIONS):  # on J'J and JJ' (singular vectors, not J's eigenvectors)
-        v, w = inv @ (inv.T @ v), inv.T @ (inv @ w)
-        v, w = v / small_norm(v), w / small_norm(w)
+    start = jnp.asarray(1.0 + 0.1 * np.arange(mech.m), dtype)  # deterministic, not orthogonal to a null vector
+
+    def iterate(_, vw):  # on J'J and JJ' (singular vectors, not J's eigenvectors)
+        v_, w_ = inv @ (inv.T @ vw[0]), inv.T @ (inv @ vw[1])
+        return v_ / small_norm(v_), w_ / small_norm(w_)
+
+    v, w = jax.lax.fori_loop(0, FOLD_ITERATIONS, iterate, (start, start))
     R = mech.residual_scales(p, dtype)
     along = lambda t: mech.residual(q + t * v * s, u, p) / R  # noqa: E731
     curve = jax.jvp(lambda t: jax.jvp(along, (t,), (jnp.ones((), dtype),))[1], (jnp.zeros((), dtype),), (jnp.ones((), dtype),))[1]
