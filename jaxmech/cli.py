@@ -8,6 +8,7 @@ jaxmech export SCENE [--at VALUE] --out FILE.dxf|FILE.svg [--set NAME=VALUE ...]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
 jaxmech sweep SCENE --random COUNT [--range NAME=LOW:HIGH ... | --vary geometry|all] [--seed S] [--figures [--figure NAME=MOD:FN]] --out DIR.parquet
 jaxmech report [--out DIR] [--points N] [--scenes NAME ...]
+jaxmech simulate FILE.toml [--duration T] [--step H] [--set NAME=VALUE ...] [--out DIR] [--plots all|none]
 ```
 
 Values are SI (m, rad, s, kg, N); a ``--set`` value may carry a unit instead
@@ -316,8 +317,14 @@ def _cmd_report(args) -> int:
     return 1 if failed else 0
 
 
+def _cmd_simulate(args) -> int:
+    from .cli_simulate import simulate_command  # forward dynamics of a linkage file
+
+    return simulate_command(args)
+
+
 _VERBS = {"scenes": _cmd_scenes, "run": _cmd_run, "animate": _cmd_animate, "export": _cmd_export, "sweep": _cmd_sweep,
-          "report": _cmd_report}
+          "report": _cmd_report, "simulate": _cmd_simulate}
 
 
 def _check_destination(args) -> None:
@@ -333,7 +340,7 @@ def _check_destination(args) -> None:
             raise UsageError(NO_FFMPEG)
     if args.verb == "export" and Path(args.out).suffix.lower() not in (".dxf", ".svg"):
         raise UsageError(f"--out must end in .dxf or .svg, got {args.out!r}")
-    if args.verb in ("run", "report"):
+    if args.verb in ("run", "report", "simulate"):
         values.check_writable_dir(Path(args.out), "--out")
     elif args.verb in ("animate", "export") and args.out:
         values.check_writable_file(Path(args.out), "--out")

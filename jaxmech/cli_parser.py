@@ -36,6 +36,7 @@ def parser() -> Parser:
     _add_export(sub)
     _add_sweep(sub)
     _add_report(sub)
+    _add_simulate(sub)
     return p
 
 
@@ -148,3 +149,24 @@ def _add_report(sub) -> None:
     rep.add_argument("--out", default="jaxmech-report", metavar="DIR", help="output folder (default ./jaxmech-report)")
     rep.add_argument("--points", type=values.points, default=101, metavar="N", help="number of inputs over each stroke (default 101)")
     rep.add_argument("--scenes", nargs="+", metavar="NAME", default=None, help="only these scenes (default: all)")
+
+
+def _add_simulate(sub) -> None:
+    """Add the ``simulate`` verb: forward dynamics of a linkage file to CSV and a PNG plot."""
+    s = sub.add_parser(
+        "simulate",
+        help="forward dynamics of a linkage file (its [simulate] table): CSV, PNG plot, summary",
+        description="Integrate the equations of motion of the linkage in FILE (Linkage.forward_dynamics) as its "
+        "[simulate] table says (duration, step, start, drive: a DC motor, a constant torque or none) and write "
+        "DIR/NAME_simulate.csv (one row per time step, columns NAME[UNIT]) and DIR/NAME_simulate.png (the input's "
+        "position and speed, the motor's current, against time); print a summary.",
+    )
+    s.add_argument("file", metavar="FILE", help="a linkage file LINKAGE.toml / .json (docs/linkage_files.md)")
+    s.add_argument("--duration", default=None, metavar="TIME", help="the run's time, replacing [simulate] duration (s, or with a unit: 2s, 500ms)")
+    s.add_argument("--step", default=None, metavar="TIME", help="the integrator's step, replacing [simulate] step (s, or with a unit: 1ms)")
+    s.add_argument("--set", dest="sets", action="append", metavar="NAME=VALUE", default=[],
+                   help="override a parameter of the linkage ('jaxmech scenes FILE' lists them) or of the run (R_a, K_m, "
+                   "L_a, ratio, voltage, torque); SI or with its unit; repeatable")
+    s.add_argument("--out", default="jaxmech-out", metavar="DIR",
+                   help="output folder (default ./jaxmech-out; made if missing, inside a folder that exists)")
+    s.add_argument("--plots", choices=("all", "none"), default="all", help="all (default: the PNG plot) or none (CSV and summary only)")

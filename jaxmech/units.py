@@ -30,6 +30,12 @@ _SCALES = {
     "Pa": {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6, "GPa": 1e9},
     "m^2": {"m^2": 1.0, "mm^2": 1e-6, "cm^2": 1e-4},
     "-": {"-": 1.0, "%": 1e-2},
+    # a DC motor's (jaxmech simulate's [simulate.motor])
+    "ohm": {"ohm": 1.0, "mohm": 1e-3, "kohm": 1e3},
+    "H": {"H": 1.0, "mH": 1e-3, "uH": 1e-6},
+    "V": {"V": 1.0, "mV": 1e-3, "kV": 1e3},
+    "A": {"A": 1.0, "mA": 1e-3},
+    "N m/A": {"N m/A": 1.0, "Nm/A": 1.0, "mN m/A": 1e-3, "V s/rad": 1.0},
 }
 
 _NUMBER = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?:inf|nan))\s*(.*?)\s*$", re.IGNORECASE)

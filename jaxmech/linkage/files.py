@@ -6,7 +6,8 @@ The keys are ``Linkage``'s arguments (``points``, ``links``, ``ground``, ``drive
 ``gas_springs``, ``dampers``, ``rotary_dampers``, the joints' ``friction``, ``name``) plus an optional ``[stroke]``
 table for the command line: ``from``, ``to`` (the driven input's range, SI or with a unit:
 ``"0deg"``), ``speed`` (rad/s or m/s), ``summary``, and for a reversing or given drive
-``law = "rock"`` with ``cycles`` and ``period``, or ``samples`` (``linkage.stroke_file``).  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
+``law = "rock"`` with ``cycles`` and ``period``, or ``samples`` (``linkage.stroke_file``), and an optional
+``[simulate]`` table for ``jaxmech simulate`` (forward dynamics: ``linkage.simulate_file``).  Numbers are SI; a string may carry a unit (``"280mm"``, ``"30deg"``).
 """
 
 from __future__ import annotations
@@ -21,10 +22,12 @@ from .elements import ARGUMENTS
 from .spec import Linkage
 from .stroke_file import STROKE_KEYS
 
-__all__ = ["read_linkage_file", "load_linkage", "LINKAGE_KEYS"]
+__all__ = ["read_linkage_file", "read_linkage_tables", "load_linkage", "LINKAGE_KEYS", "TABLES"]
 
 LINKAGE_KEYS = ("name", "points", "links", "ground", "driver", "sliders", "slots", "actuators", "mass", "inertia",
                 "centre", "gravity", "forces", "moments", *ARGUMENTS, "friction")
+#: The command line's tables beside the linkage's keys: ``[stroke]`` and ``[simulate]``.
+TABLES = ("stroke", "simulate")
 
 
 def _toml(text: str) -> dict:
@@ -98,23 +101,35 @@ def read_linkage_file(path) -> tuple[Linkage, dict]:
 
     **Raises** ``ValueError`` naming the file and what is wrong (an unknown key, a bad value,
     a linkage that does not close); ``OSError`` when it cannot be read."""
+    linkage, stroke, _ = read_linkage_tables(path)
+    return linkage, stroke
+
+
+def read_linkage_tables(path) -> tuple[Linkage, dict, dict | None]:
+    """``(linkage, stroke, simulate)`` from a linkage file: ``read_linkage_file``'s pair and
+    its ``[simulate]`` table as written (None when it has none; ``linkage.simulate_file``
+    reads it)."""
     path = Path(path)
     text = path.read_text(encoding="utf-8")
     try:
         data = _json(text) if path.suffix.lower() == ".json" else _toml(text)
-        return _linkage(data, path.stem)
+        linkage, stroke = _linkage(data, path.stem)
     except ValueError as err:
         raise ValueError(f"{path.name}: {err}") from None
+    simulate = data.get("simulate")
+    if simulate is not None and not isinstance(simulate, dict):
+        raise ValueError(f"{path.name}: simulate must be a table ([simulate] with duration, step, ...), got {simulate!r}")
+    return linkage, stroke, simulate
 
 
 def _linkage(data, stem: str) -> tuple[Linkage, dict]:
     """``(linkage, stroke)`` from a file's table; ``ValueError`` saying what is wrong."""
     if not isinstance(data, dict):
         raise ValueError("the file must hold a table of keys")
-    unknown = [k for k in data if k not in LINKAGE_KEYS + ("stroke",)]
+    unknown = [k for k in data if k not in LINKAGE_KEYS + TABLES]
     if unknown:
-        raise ValueError(f"unknown key(s) {unknown}; a linkage file has {list(LINKAGE_KEYS)} and [stroke]"
-                         f"{near_hint(unknown, LINKAGE_KEYS + ('stroke',))}")
+        raise ValueError(f"unknown key(s) {unknown}; a linkage file has {list(LINKAGE_KEYS)} and [stroke], [simulate]"
+                         f"{near_hint(unknown, LINKAGE_KEYS + TABLES)}")
     for k in ("points", "links"):
         if k not in data:
             raise ValueError(f"a linkage file needs [{k}]")
