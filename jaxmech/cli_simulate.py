@@ -71,9 +71,9 @@ def summary(lk, sim, tr, cols: dict) -> str:
     last = int(valid[-1]) if valid.size else 0
     t_end = float(cols["t[s]"][last])
     drive = {"none": "free motion", "motor": "driven by the motor", "torque": "driven by a constant torque"}[sim.drive]
-    lines = [f"{lk.name}: forward dynamics, {sim.steps} steps of {sim.step:.6g} s to t = {t_end:.6g} s "
-             f"({drive}); "
-             f"status {DynStatus(status).name.lower()}"]
+    t_last = float(cols["t[s]"][-1])
+    lines = [f"{lk.name}: forward dynamics over {t_last:.6g} s ({sim.steps} steps of {sim.step:.6g} s), {drive}; "
+             f"status {DynStatus(status).name.lower()}" + (f" at t = {t_end:.6g} s" if status != 0 else "")]
     name = lk.mechanism.inputs[0]
     for key in (k for k in cols if k.startswith(f"{name}[") or k.startswith(f"{name}_dot[")):
         unit = key[key.index("[") + 1:-1]

@@ -251,6 +251,12 @@ def test_the_example_file(tmp_path, capsys):
     assert 0.8 * 3.0 * (1 - np.exp(-2.0)) < cols["current[A]"][1] < 3.0
     np.testing.assert_allclose(cols["effort_theta_crank[N m]"], 20 * 0.04 * cols["current[A]"], rtol=1e-15)
     assert cols["theta_crank_dot[rad/s]"][-1] > 0.1
+    # a step far too large: the run stops at once; exit 0, the reason and its fix printed, the rows after it NaN
+    assert main(["simulate", str(path), "--step", "0.1s", "--duration", "0.5s", "--plots", "none", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "status not_converged at t = 0 s" in printed and "stopped early:" in printed and "smaller h" in printed, printed
+    stopped = read_csv(tmp_path / "fourbar_motor_simulate.csv")
+    assert stopped["status[-]"][0] == 0 and np.all(stopped["status[-]"][1:] == 3) and np.all(np.isnan(stopped["theta_crank[rad]"][1:]))
 
 
 # --------------------------------------------------------------------------- mistakes
@@ -285,7 +291,7 @@ def test_each_mistake_is_one_line_naming_the_key(case, tmp_path, capsys, monkeyp
         (tmp_path / "bar.toml").write_text(text)
     assert main(["simulate", "bar.toml" if text is not None else "fourbar", *extra, "--plots", "none"]) == 2
     line = one_line(capsys.readouterr().err, *says)
-    assert text is None or case.startswith("--set") or line.startswith("jaxmech: error: bar.toml: "), line
+    assert text is None or case.startswith(("--set", "bad --")) or line.startswith("jaxmech: error: bar.toml: "), line
     assert not (tmp_path / "jaxmech-out" / "bar_simulate.csv").exists()
 
 
