@@ -302,3 +302,42 @@ def test_a_mistake_in_a_real_process_is_one_line(tmp_path):
                           cwd=tmp_path, env=env, timeout=300)
     assert proc.returncode == 2
     one_line(proc.stderr, "bar.toml: [simulate] needs friction_speed")
+
+
+def test_help_and_an_unwritable_destination_before_computing(tmp_path, capsys, monkeypatch):
+    import jaxmech.cli as cli
+
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "--help"])
+    assert exc.value.code == 0 and capsys.readouterr().out.startswith("usage: jaxmech simulate")
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert "simulate" in capsys.readouterr().out
+
+    def trap():
+        raise AssertionError("the destination was not checked before computing")
+
+    monkeypatch.setattr(cli, "_setup_jax", trap)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file")
+    assert main(["simulate", str(ROOT / "examples" / "linkages" / "fourbar_motor.toml"), "--out", str(blocker / "out")]) == 2
+    one_line(capsys.readouterr().err, "--out", "is a file, not a folder")
+
+
+def test_a_json_file_reads_the_same_table(tmp_path):
+    (tmp_path / "bar.toml").write_text(PENDULUM + SIMULATE + '[simulate.motor]\nR_a = "500 mohm"\nK_m = "50 mN m/A"\n'
+                                       'L_a = "200 uH"\nratio = 10\nvoltage = "24 V"\ncurrent0 = "100 mA"\n')
+    (tmp_path / "bar.json").write_text(
+        '{"name": "bar", "ground": "O", "driver": "crank", "gravity": 9.81, "points": {"O": [0, 0], "A": [0.3, 0]},'
+        ' "links": {"crank": "O A"}, "mass": {"crank": 2.0},'
+        ' "simulate": {"duration": 0.4, "step": "1ms", "u0": "30deg", "u_dot0": 1.0,'
+        '              "motor": {"R_a": 0.5, "K_m": 0.05, "L_a": 2e-4, "ratio": 10, "voltage": 24, "current0": 0.1}}}')
+    sims = []
+    for name in ("bar.toml", "bar.json"):
+        lk, _, table = read_linkage_tables(tmp_path / name)
+        sims.append(read_simulate(table, lk))
+    toml, json = sims
+    assert toml.steps == json.steps == 400 and toml.u0 == pytest.approx(json.u0, rel=1e-15) and toml.u_dot0 == json.u_dot0
+    assert toml.motor == json.motor and toml.current0 == pytest.approx(json.current0, rel=1e-15)
+    assert dict(json.values) == {"R_a": 0.5, "K_m": 0.05, "L_a": 2e-4, "ratio": 10.0, "voltage": 24.0}
+    assert dict(toml.values) == pytest.approx(dict(json.values), rel=1e-15)
