@@ -28,7 +28,7 @@ from matplotlib.figure import Figure
 
 from .drawing import Drawer, new_figure
 from .scenes import Scene, SceneResult, get_scene
-from .scenes.outputs import output_units
+from .scenes.outputs import merged_status, output_units, sample_status
 from .status import Status, status_counts
 from .sweep import design_motion
 from .units import for_reading
@@ -39,7 +39,10 @@ __all__ = ["LiveView", "live_view", "update", "sliders", "evaluate"]
 @functools.partial(jit, static_argnums=(0, 1))
 def _evaluate(scene: Scene, points: int, p):
     mo, ok = design_motion(scene, points, p)
-    outs = scene.outputs(p, mo) if scene.outputs is not None else {}
+    outs, own = sample_status(scene, p, mo) if scene.outputs is not None else ({}, None)
+    if own is not None:  # outputs with a status of their own (joint friction's jammed samples)
+        mo = dataclasses.replace(mo, status=merged_status(mo.status, own))
+        ok = mo.status == Status.CONVERGED
 
     def nan(x):  # failed samples: NaN for drawing, as run_scene gives them
         return jnp.where(jnp.reshape(ok, (-1,) + (1,) * (x.ndim - 1)), x, jnp.nan)

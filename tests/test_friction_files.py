@@ -6,9 +6,9 @@
   and friction loads along a reversing drive, bit for bit;
 - a misspelt or bad friction entry is refused in one line naming the file, the key and the
   fix;
-- ``jaxmech run`` (``scenes``, ``animate``, ``export``, ``sweep``) on a file with friction answers one line (the command line's scenes do
-  not take friction yet), no traceback, nothing written; a scene made of a linkage with
-  friction by ``linkage_scene`` itself is refused too.
+- ``jaxmech scenes`` on a file with friction lists the friction parameters with their units
+  and ``jaxmech export`` draws it; a scene made of the file's linkage by ``linkage_scene``
+  has them as parameters (``tests/test_friction_scenes.py`` runs such files).
 """
 
 import jax
@@ -154,23 +154,20 @@ def test_bad_friction_in_json_names_the_file_and_the_key(tmp_path):
         jm.load_linkage(tmp_path / "press.json")
 
 
-def test_the_command_line_answers_a_file_with_friction_in_one_line(tmp_path, monkeypatch, capsys):
+def test_the_command_line_takes_a_file_with_friction(tmp_path, monkeypatch, capsys):
     (tmp_path / "press.toml").write_text(DRAWING + FRICTION_TOML)
     monkeypatch.chdir(tmp_path)
-    for verb in (["run", "press.toml", "--plots", "none"], ["scenes", "press.toml"], ["animate", "press.toml", "--out", "p.gif"],
-                 ["export", "press.toml", "--out", "p.svg"], ["sweep", "press.toml", "--grid", "m_rod=1:2:2", "--out", "p.csv"]):
-        assert main(verb) == 2
-        err = capsys.readouterr().err
-        assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
-        assert err.startswith("jaxmech: error: press.toml: [friction]: the command line does not take joint friction yet"), err
-        assert "take the [friction] table out" in err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["press.toml"]  # nothing written
-    # the same file without its friction runs
-    (tmp_path / "press.toml").write_text(DRAWING)
     assert main(["scenes", "press.toml"]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()[2:] if line.strip()}
+    for name, unit in (("mu_O", "-"), ("rpin_A", "m"), ("cv_A", "N m s/rad"), ("cv_piston", "N s/m")):
+        assert rows[name].split(None, 1)[1].startswith(unit + " ") and rows[name].endswith("joint friction"), rows[name]
+    assert main(["export", "press.toml", "--out", "p.svg"]) == 0
+    assert (tmp_path / "p.svg").stat().st_size > 0
 
 
-def test_a_scene_of_a_linkage_with_friction_is_refused_wherever_it_is_made():
-    with pytest.raises(ValueError, match="scenes .* do not take joint friction yet"):
-        linkage_scene(in_python(friction=FRICTION_JSON))
+def test_a_scene_of_a_linkage_with_friction_has_its_parameters():
+    scene = linkage_scene(in_python(friction=FRICTION_JSON))
+    lk = in_python(friction=FRICTION_JSON)
+    assert {k: scene.defaults[k] for k in lk.friction.parameters} == {k: lk.params[k] for k in lk.friction.parameters}
+    assert scene.parameters["cv_A"][0] == "N m s/rad" and scene.parameters["cv_piston"][0] == "N s/m"
     assert linkage_scene(in_python()).name == "press"

@@ -19,7 +19,8 @@ numpy (no jaxmech code):
 - friction zero (or absent): bit for bit the frictionless results;
 - the derivative of the peak crank torque in a friction coefficient, a pin radius and the
   rod's length against central differences;
-- a wedge jammed by friction (no driving effort, self-locking), bad input, scenes refused.
+- a wedge jammed by friction (no driving effort, self-locking), bad input; a linkage with
+  friction made a scene carries its friction (``tests/test_friction_scenes.py`` runs it).
 """
 
 import jax
@@ -318,10 +319,13 @@ def test_bad_friction_is_refused_naming_the_fix(friction, words):
     assert words in str(err.value)
 
 
-def test_a_scene_of_a_linkage_with_friction_is_refused_not_left_without_it():
-    with pytest.raises(ValueError, match="scenes .* do not take joint friction yet"):
-        linkage(friction=FRICTION).scene()
-    linkage().scene()  # without friction, as before
+def test_a_scene_of_a_linkage_with_friction_carries_its_friction():
+    scene = linkage(friction=FRICTION).scene()
+    names = [k for k in scene.defaults if k.startswith(("mu_", "rpin_", "cv_"))]
+    assert names and all(scene.parameters[k][1] == "joint friction" for k in names)
+    assert scene.outputs.status  # its outputs mark the samples friction jams
+    bare = linkage().scene()  # without friction, as before: no friction parameter, no status of its own
+    assert not bare.outputs.status and not any(k.startswith(("mu_", "rpin_", "cv_")) for k in bare.defaults)
 
 
 def test_a_wedge_jammed_by_friction_has_no_driving_effort():

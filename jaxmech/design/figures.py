@@ -18,6 +18,7 @@ from ..options import SolverOptions
 from ..scenes.base import Scene, as_scene
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..scenes.columns import LazyColumns, design_motion
+from ..status import Status
 
 __all__ = ["SceneFigure", "as_batch", "figure_value", "peak", "scene_figure"]
 
@@ -129,11 +130,13 @@ class SceneFigure:
         mo, converged = design_motion(self.scene, self.points, full, options=self.options)
         ok = jnp.all(converged)
         # read lazily: a figure of the effort alone never traces every joint's reaction
-        cols = _Finite(LazyColumns(self.scene, full, mo))
-        value = jnp.asarray(self.reduce(cols, full))
+        lazy = LazyColumns(self.scene, full, mo)
+        value = jnp.asarray(self.reduce(_Finite(lazy), full))
         if value.shape != ():
             raise ValueError(f"figure {self.name!r}: reduce must return a scalar, got shape {value.shape}")
         ok = ok & jnp.isfinite(value)
+        if lazy.outputs_status is not None:  # outputs with a status of their own: a sample jammed by joint friction
+            ok = ok & jnp.all(lazy.outputs_status == Status.CONVERGED)
         return jnp.where(ok, value, jnp.nan), ok
 
 

@@ -52,8 +52,11 @@ class Trajectory:
     - `u_ddot` ``(N+1, dof)``: the inputs' accelerations (rad/s^2 or m/s^2) from the
       equations of motion at each state; `q_dot` ``(N+1, m)``: the coordinates' rates.
     - `h` (s), `closable` and `cond`: the step, and the stop's diagnosis (``StopCause``).
+    - `friction`, `friction_speed`: the run's joint friction (a ``JointFriction`` or None)
+      and its sign's speed scale ``W`` per friction joint (static): what
+      ``dynamics(model, p)`` applies at the run's states.
     - ``dynamics(model, p)``: the coordinates' accelerations, the driving effort and every
-      joint's reaction along the run (an ``InverseDynamics``).
+      joint's reaction along the run (an ``InverseDynamics``), with the run's friction.
     """
 
     t: jax.Array
@@ -72,6 +75,8 @@ class Trajectory:
     cond: jax.Array
     close_iters: int = dataclasses.field(metadata=dict(static=True), default=5)
     newton_max: int = dataclasses.field(metadata=dict(static=True), default=12)
+    friction: object = dataclasses.field(metadata=dict(static=True), default=None)
+    friction_speed: tuple = dataclasses.field(metadata=dict(static=True), default=())
 
     def message(self) -> str:
         """Why the run ended, in words (``stop_message``): a ``POSITION`` stop names the step
@@ -84,7 +89,10 @@ class Trajectory:
         """Inverse dynamics at every state of the run (``forward_along.trajectory_dynamics``):
         an ``InverseDynamics`` with the coordinates' accelerations ``q_ddot``, the driving
         effort ``tau`` (the actuators' and the `load`'s generalized force on each input,
-        N m or N) and every joint's reaction ``joints`` (N, complex), NaN after a stop."""
+        N m or N) and every joint's reaction ``joints`` (N, complex), NaN after a stop.  A
+        run with joint friction applies it here too (its ``friction`` at its
+        ``friction_speed``): the reactions with friction, ``joint_friction`` each joint's
+        load, and ``tau`` the effort with friction balancing the run's accelerations."""
         from .forward_along import trajectory_dynamics
 
         return trajectory_dynamics(model, self, p, options=options)
@@ -248,4 +256,5 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     n_motor = acts[0][1].n_states if motor is not None else 0
     xp = np if isinstance(run.ys, np.ndarray) else jnp  # on the host where the run was gathered there (run_chunks)
     return gathered(run, mech.dof, n_motor, xp.asarray(t0) + xp.asarray(h) * xp.arange(int(steps) + 1, dtype=dtype), h,
-                    dict(closable=closable, cond=cond, close_iters=int(close_iters), newton_max=int(newton_max)))
+                    dict(closable=closable, cond=cond, close_iters=int(close_iters), newton_max=int(newton_max),
+                         friction=friction, friction_speed=integ.friction_speed))

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..options import SolverOptions
+from .friction import friction_parameters
 from .inverse import InverseDynamics, inverse_dynamics_at
 from .model import Model
 
@@ -38,15 +39,22 @@ def trajectory_dynamics(model: Model, tr, p: Mapping, *, options: SolverOptions 
     input's positive sense) that the run's motor, actuators and `load` exert on each input,
     since ``M u_ddot + h = tau`` there, and every joint's reaction ``joints`` (N, complex:
     the joint's first body on its second), as ``Model``'s inverse dynamics gives them.
-    Rows after a stop are NaN.
+    Rows after a stop are NaN.  A run with joint friction (``tr.friction``) has it here
+    too, its sign over the run's own speed scale ``tr.friction_speed``
+    (``inverse_dynamics_at(..., friction=, friction_speed=)``): ``tau`` balances the run's
+    accelerations with the friction loads (``joint_friction``), the reactions include them.
 
-    `p`: the run's parameters (the model's are read; a motor's extra names are ignored).
+    `p`: the run's parameters (the model's and friction's are read; a motor's extra names
+    are ignored).
     **Returns** an ``InverseDynamics`` with leading axis ``N+1``.
     """
-    missing = [k for k in model.parameters if k not in p]
+    fr = getattr(tr, "friction", None)
+    names = model.parameters + friction_parameters(model, fr)
+    missing = [k for k in names if k not in p]
     if missing:
         raise ValueError(f"{model.mechanism.name}: trajectory_dynamics needs the run's parameters p; missing {missing}")
-    pm = {k: p[k] for k in model.parameters}
+    pm = {k: p[k] for k in names}
+    friction = {} if fr is None else dict(friction=fr, friction_speed=tr.friction_speed)
     n = tr.t.shape[0]
     # cut on the host where nothing is traced: slicing a new length on the device would
     # compile small programs for each new duration
@@ -56,7 +64,7 @@ def trajectory_dynamics(model: Model, tr, p: Mapping, *, options: SolverOptions 
     for start in range(0, n, BLOCK):
         blk = lambda x: _block(x, start, BLOCK)  # noqa: E731
         parts.append(inverse_dynamics_at(model, blk(tr.u), blk(tr.u_dot), blk(tr.u_ddot), pm, blk(tr.q), t=blk(tr.t),
-                                         options=options))
+                                         options=options, **friction))
     if isinstance(tr.u, np.ndarray):
         return jax.tree_util.tree_map(lambda *xs: jax.device_put(np.concatenate([np.asarray(x) for x in xs])[:n]), *parts)
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:n], *parts)

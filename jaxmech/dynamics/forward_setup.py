@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..inputs import as_coords, as_inputs
+from .friction import friction_speeds
 from .status import DynStatus, dyn_status_message
 
 __all__ = ["checked_arguments", "run_actuators", "friction_speeds", "initial_state", "stroke_bounds", "StopCause",
@@ -66,26 +67,6 @@ def run_actuators(mech, motor, voltage, motor_input, actuators) -> list:
                              f"(n_states, initial_state, force, rate)")
         acts.append((mech.inputs.index(name), act))
     return acts
-
-
-def friction_speeds(friction, speed) -> tuple:
-    """Each friction joint's speed scale ``W`` (a tuple of positive floats; ``()`` without
-    friction) from `speed`: a number for every joint or one per joint of ``friction.joints``.
-    ``ValueError`` for a scale missing, not positive, or given without friction."""
-    if friction is None:
-        if speed is not None:
-            raise ValueError("friction_speed is the speed scale of joint friction's sign: give it with friction only")
-        return ()
-    k = len(friction.joints)
-    if speed is None:
-        raise ValueError("joint friction in forward dynamics needs friction_speed=, each joint's speed scale W (rad/s at a "
-                         "pin, m/s in a guide; e.g. the largest speed expected): the sign tanh(w / (width W)) changes "
-                         "within width W of w = 0")
-    w = np.broadcast_to(np.asarray(speed, float), (k,)) if np.ndim(speed) == 0 else np.asarray(speed, float)
-    if w.shape != (k,) or not np.all(np.isfinite(w) & (w > 0)):
-        raise ValueError(f"friction_speed must be a positive number or {k} of them (one per friction joint "
-                         f"{[fj.joint for fj in friction.joints]}), got {speed!r}")
-    return tuple(float(x) for x in w)
 
 
 def initial_state(acts, has_motor: bool, u0, ud0, current0, pj, dtype):

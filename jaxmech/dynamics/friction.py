@@ -47,17 +47,19 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..actuators import resolve
 from ..implicit import implicit_solution
 from ..linalg import solve_small
+from ..status import Status
 from .joints import GROUND, Prismatic, Revolute, Slot, joint_name
 from .model import Model, geometry, point_of
 from .reactions import joint_axes, reaction_system, solve_reaction_system, unpack_reactions
 from .virtual_power import LoadedState
 
-__all__ = ["FrictionJoint", "JointFriction", "FrictionReactions", "joint_speeds", "friction_signs", "friction_reactions",
-           "friction_parameters", "friction_joints", "friction_norms", "friction_terms", "unit_friction_solutions",
+__all__ = ["FrictionJoint", "JointFriction", "FrictionReactions", "joint_speeds", "friction_signs", "speed_scale", "stroke_signs", "friction_speeds",
+           "friction_reactions", "friction_status", "friction_parameters", "friction_joints", "friction_norms", "friction_terms", "unit_friction_solutions",
            "solve_friction_loads", "NEWTON_STEPS"]
 
 #: Newton steps allowed per sample (a converged sample takes 2 to 5).
@@ -181,6 +183,50 @@ def friction_signs(fr: JointFriction, speeds, scale):
     ``(..., k)``, ``W = scale (k,)`` the joint's speed scale (0 where it never moves)."""
     moving = scale > 0
     return jnp.where(moving, jnp.tanh(speeds / (fr.width * jnp.where(moving, scale, 1.0))), 0.0)
+
+
+def speed_scale(speeds, ok=None):
+    """Each joint's speed scale ``W (k,)`` over a stroke's samples: its largest finite
+    ``|w|`` of `speeds` ``(N, k)``, over the samples where `ok` ``(N,)`` (all: None)."""
+    keep = jnp.isfinite(speeds) if ok is None else jnp.isfinite(speeds) & ok[:, None]
+    return jnp.max(jnp.where(keep, jnp.abs(speeds), 0.0), axis=0, initial=0.0)
+
+
+def stroke_signs(fr: JointFriction, speeds, ok=None):
+    """The regularised signs ``(N, k)`` of a stroke's joint speeds `speeds` ``(N, k)``
+    (``joint_speeds`` at each sample), each joint's band set by its own speed scale over
+    the stroke (``speed_scale``; `ok` ``(N,)`` the samples that count, None: all): the
+    law of every stroke with friction (``inverse.inverse_dynamics``, ``holding``, a
+    linkage's scene)."""
+    return friction_signs(fr, speeds, speed_scale(speeds, ok))
+
+
+def friction_speeds(friction, speed) -> tuple:
+    """Each friction joint's speed scale ``W`` (a tuple of positive floats; ``()`` without
+    friction) from `speed`: a number for every joint or one per joint of ``friction.joints``.
+    ``ValueError`` for a scale missing, not positive, or given without friction."""
+    if friction is None:
+        if speed is not None:
+            raise ValueError("friction_speed is the speed scale of joint friction's sign: give it with friction only")
+        return ()
+    k = len(friction.joints)
+    if speed is None:
+        raise ValueError("joint friction at given states (forward dynamics, inverse_dynamics_at) needs friction_speed=, "
+                         "each joint's speed scale W (rad/s at a pin, m/s in a guide; e.g. the largest speed expected): "
+                         "the sign tanh(w / (width W)) changes within width W of w = 0")
+    w = np.broadcast_to(np.asarray(speed, float), (k,)) if np.ndim(speed) == 0 else np.asarray(speed, float)
+    if w.shape != (k,) or not np.all(np.isfinite(w) & (w > 0)):
+        raise ValueError(f"friction_speed must be a positive number or {k} of them (one per friction joint "
+                         f"{[fj.joint for fj in friction.joints]}), got {speed!r}")
+    return tuple(float(x) for x in w)
+
+
+def friction_status(status, converged):
+    """The samples' ``Status`` with ``MAX_STEPS`` where the position converged but the
+    friction's Newton did not (`converged`: ``FrictionReactions.converged``): a linkage
+    jammed by friction, which no effort drives that way."""
+    stuck = (status == Status.CONVERGED) & ~converged
+    return jnp.where(stuck, jnp.asarray(Status.MAX_STEPS, status.dtype), status)
 
 
 def _magnitude(x, cols):

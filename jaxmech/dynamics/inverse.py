@@ -23,7 +23,8 @@ from ..options import SolverOptions
 from ..positions import solve_one
 from ..status import Status
 from ..xla import jit
-from .friction import JointFriction, friction_parameters, friction_reactions, friction_signs, joint_speeds
+from .friction import (JointFriction, friction_parameters, friction_reactions, friction_signs, friction_speeds, friction_status,
+                       joint_speeds, stroke_signs)
 from .joints import Prismatic, Slot, joint_name
 from .model import Model, mechanism_params, prepare_params
 from .reactions import joint_axes, joint_reactions
@@ -193,22 +194,29 @@ def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2
     return out
 
 
-def _at_one(model, quasi_static, names, options, u, ud, udd, p, t, guess):
+def _at_one(model, quasi_static, names, options, u, ud, udd, p, t, guess, friction=None, scale=None):
     mech = model.mechanism
     sol = solve_one(mech, u, mechanism_params(model, p), guess, options)
     ok = sol.status == Status.CONVERGED
     d1, d2 = input_derivatives(mech, jnp.where(ok, sol.q, 0.0), u, mechanism_params(model, p), ok)
-    return dict(_sample(model, quasi_static, names, p, t, u, ud, udd, sol.q, d1, d2), q=sol.q, status=sol.status)
+    if friction is None:
+        return dict(_sample(model, quasi_static, names, p, t, u, ud, udd, sol.q, d1, d2), q=sol.q, status=sol.status)
+    w = _speeds(model, friction, p, u, ud, udd, sol.q, d1, d2)
+    out = _sample(model, quasi_static, names, p, t, u, ud, udd, sol.q, d1, d2, friction_signs(friction, w, scale), w,
+                  friction=friction)
+    return _with_friction_status(out, sol.q, sol.status)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2))
-def inverse_dynamics_batch(model, quasi_static, options, u, ud, udd, p, t, guess):
+@functools.partial(jit, static_argnums=(0, 1, 2), static_argnames=("friction",))
+def inverse_dynamics_batch(model, quasi_static, options, u, ud, udd, p, t, guess, *, friction=None, scale=None):
     """The compiled kernel of ``inverse_dynamics_at`` on a flat batch (jit; `model`,
-    `quasi_static` and `options` static): `u`, `ud`, `udd` ``(n, dof)``, `p` leaves ``(n,)``,
-    `t` ``(n,)``, `guess` ``(n, m)``, no checks.  Returns a dict of the ``InverseDynamics``
+    `quasi_static`, `options` and `friction` static): `u`, `ud`, `udd` ``(n, dof)``, `p`
+    leaves ``(n,)``, `t` ``(n,)``, `guess` ``(n, m)``, `scale` ``(k,)`` the friction joints'
+    speed scales (with `friction`), no checks.  Returns a dict of the ``InverseDynamics``
     fields (``q``, ``tau``, ``reactions``, ``status``, ``points``, ``joints``...)."""
     names = tuple(model.mechanism.points)
-    return jax.vmap(lambda *a: _at_one(model, quasi_static, names, options, *a))(u, ud, udd, p, t, guess)
+    one = lambda *a: _at_one(model, quasi_static, names, options, *a, friction=friction, scale=scale)  # noqa: E731
+    return jax.vmap(one)(u, ud, udd, p, t, guess)
 
 
 def _joint_bodies(model: Model) -> tuple[JointBodies, ...]:
@@ -222,23 +230,30 @@ def _result(model: Model, t, u, ud, udd, fields) -> InverseDynamics:
 
 
 def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=0.0, quasi_static: bool = False,
-                        options: SolverOptions = SolverOptions()) -> InverseDynamics:
+                        options: SolverOptions = SolverOptions(), friction: JointFriction | None = None,
+                        friction_speed=None) -> InverseDynamics:
     """Driving forces and reactions at a batch of independent states (jit, vmapped).
 
     **Arguments**: `u`, `u_dot`, `u_ddot`: ``(..., dof)`` (or the bare batch for one input);
     `p`: parameters (arrays broadcast against the batch); `guess`: ``(..., m)`` coordinates
     near each solution (it picks the branch); `t`: time(s) for time-dependent loads;
-    `quasi_static`: leave inertia out (``statics`` is this at rest).
+    `quasi_static`: leave inertia out (``statics`` is this at rest).  `friction`: joint
+    friction (a ``JointFriction``, its parameters in `p`) with `friction_speed` its sign's
+    speed scale ``W`` (a number, or one per friction joint: independent states have no
+    stroke to take it from, as forward dynamics has none); None: none.
 
-    **Returns** an ``InverseDynamics`` with the broadcast batch shape in front.
+    **Returns** an ``InverseDynamics`` with the broadcast batch shape in front (with
+    friction, its ``joint_friction`` and ``MAX_STEPS`` where friction jams the state).
     """
     mech = model.mechanism
+    scale = friction_speeds(friction, friction_speed)
+    extra = friction_parameters(model, friction)
     u = as_inputs(mech, u)
     ud = as_inputs(mech, u_dot, "u_dot")
     udd = as_inputs(mech, u_ddot, "u_ddot")
     guess = as_coords(mech, guess)
     dtype = jnp.result_type(u, ud, udd, guess, float)
-    p = prepare_params(model, p, dtype)
+    p = prepare_params(model, p, dtype, extra)
     t = jnp.asarray(t, dtype)
     shape = batch_shape(mech, {"u": u.shape[:-1], "u_dot": ud.shape[:-1], "u_ddot": udd.shape[:-1], "guess": guess.shape[:-1],
                                "t": t.shape, **{f"p[{k!r}]": v.shape for k, v in p.items()}})
@@ -246,7 +261,8 @@ def inverse_dynamics_at(model: Model, u, u_dot, u_ddot, p: Mapping, guess, *, t=
     flat = lambda x, k: jnp.broadcast_to(x, shape + x.shape[x.ndim - k:]).reshape((n,) + x.shape[x.ndim - k:])  # noqa: E731
     args = [flat(x.astype(dtype), 1) for x in (u, ud, udd)]
     pf = {k: flat(v, 0) for k, v in p.items()}
-    out = inverse_dynamics_batch(model, bool(quasi_static), options, *args, pf, flat(t, 0), flat(guess.astype(dtype), 1))
+    fr = {} if friction is None else dict(friction=friction, scale=jnp.asarray(scale, dtype))
+    out = inverse_dynamics_batch(model, bool(quasi_static), options, *args, pf, flat(t, 0), flat(guess.astype(dtype), 1), **fr)
     out = jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), out)
     r = lambda x: x.reshape(shape + x.shape[1:])  # noqa: E731
     return _result(model, jnp.broadcast_to(t, shape), r(args[0]), r(args[1]), r(args[2]), out)
@@ -324,11 +340,6 @@ def inverse_dynamics(model: Model, drive, t=None, p: Mapping | None = None, gues
     return _result(model, t, u, ud, udd, _with_friction_status(out, sol.q, sol.status))
 
 
-def _speed_scale(speeds):
-    """Each joint's speed scale ``W (k,)``: its largest finite ``|w|`` over the samples."""
-    return jnp.max(jnp.where(jnp.isfinite(speeds), jnp.abs(speeds), 0.0), axis=0, initial=0.0)
-
-
 def _speeds(model, friction, p, u, ud, udd, q, d1, d2):
     """The joints' relative speeds at one sample of a stroke (zero where it failed)."""
     ok = jnp.all(jnp.isfinite(q))
@@ -338,9 +349,7 @@ def _speeds(model, friction, p, u, ud, udd, q, d1, d2):
 
 def _with_friction_status(out: dict, q, status) -> dict:
     """The samples' fields with ``MAX_STEPS`` where the position converged but friction did not."""
-    ok = out.pop("friction_ok")
-    status = jnp.where((status == Status.CONVERGED) & ~ok, jnp.asarray(Status.MAX_STEPS, status.dtype), status)
-    return dict(out, q=q, status=status)
+    return dict(out, q=q, status=friction_status(status, out.pop("friction_ok")))
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2, 3, 4))
@@ -348,7 +357,7 @@ def _along_friction(model, friction, quasi_static, names, drive_static, drive_le
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, model.mechanism.dof)
     w = jax.vmap(lambda *a: _speeds(model, friction, p, *a))(u, ud, udd, q, d1, d2)
-    signs = friction_signs(friction, w, _speed_scale(w))
+    signs = stroke_signs(friction, w, jnp.all(jnp.isfinite(q), axis=-1))
     out = jax.vmap(lambda *a: _sample(model, quasi_static, names, p, *a, friction=friction))(t, u, ud, udd, q, d1, d2, signs, w)
     return AlongDrive(u, ud, udd, out)
 
@@ -387,7 +396,7 @@ def _holding_batch(model, friction, options, u, direction, p, t, guess):
     q, status, d1, d2 = jax.vmap(position)(u, p, guess)
     zero = jnp.zeros_like(u)
     w = jax.vmap(lambda *a: _speeds(model, friction, *a))(p, u, direction, zero, q, d1, d2)
-    signs = friction_signs(friction, w, _speed_scale(w))  # the sense each joint moves in, per unit input rate
+    signs = stroke_signs(friction, w, jnp.all(jnp.isfinite(q), axis=-1))  # the sense each joint moves in, per unit input rate
 
     def at_rest(sg):  # the loads at rest (no rate), friction along the sense `sg`, no viscous term
         one = lambda *a: _sample(model, True, names, *a, friction=friction)  # noqa: E731

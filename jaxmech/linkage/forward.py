@@ -87,8 +87,11 @@ def linkage_forward_dynamics(lk, *, h, steps: int, u0=None, u_dot0=0.0, p: Mappi
     stays differentiable in every parameter, ``mu_<key>``, ``rpin_<key>``, ``cv_<key>``
     among them (``dynamics.forward_friction``).  Where friction's Newton does not converge
     (friction jams the linkage) the run stops with ``DynStatus.FRICTION`` and
-    ``Trajectory.message()`` says so.  ``Trajectory.dynamics`` leaves friction out (its
-    ``tau`` then includes friction's generalized force, its reactions are frictionless).
+    ``Trajectory.message()`` says so.  The trajectory keeps the run's friction and its
+    speed scale (``Trajectory.friction``, ``friction_speed``), so ``Trajectory.dynamics``
+    applies the same law at the run's states: the effort ``tau`` with friction (the
+    motor's, actuators' and `load`'s generalized force that the run's accelerations
+    balance) and every joint's reaction with its friction load (``joint_friction``).
 
     `p`: the linkage's parameters to change (``Linkage.params``) and the values of the
     names the motor and actuators declare (``actuator_parameters``: ``R_a``, ``K_m``,

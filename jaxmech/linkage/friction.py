@@ -27,7 +27,7 @@ from ..dynamics.joints import Prismatic, Revolute, Slot, joint_name
 from ..names import did_you_mean, near_hint
 from .values import read_number
 
-__all__ = ["read_friction", "friction_key", "linkage_holding", "no_friction_in_scenes"]
+__all__ = ["read_friction", "friction_key", "linkage_holding"]
 
 FIELDS = {"mu": "-", "radius": "m", "damping": None}
 
@@ -115,10 +115,3 @@ def linkage_holding(lk, u, p: Mapping | None = None, *, t=0.0, options=None) -> 
     sol = lk.solve(u, p, **kw)
     return holding(lk.model, lk._stroke(u, "u"), lk._p(p), sol.q, lk.friction, t=t, **kw)
 
-
-def no_friction_in_scenes(lk) -> None:
-    """``ValueError`` for a linkage with joint friction made a scene: a scene's effort and
-    reactions (``scenes.linkage_scene``) have no friction yet, and would leave it out."""
-    if lk.friction is not None:
-        raise ValueError(f"{lk.name}: scenes (run_scene, sweep_scene, the design functions) do not take joint friction yet; "
-                         "use Linkage.inverse_dynamics or Linkage.holding (vary mu_<joint> through p=), or a linkage without friction=")

@@ -17,7 +17,7 @@ from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..names import closest, did_you_mean, near_hint
 from ..continuation import solve_stroke
 from ..options import SolverOptions
-from .friction import linkage_holding, no_friction_in_scenes, read_friction
+from .friction import linkage_holding, read_friction
 from .elements import drawing_values, read_elements
 from .mass import derived_shapes, link_mass_properties
 from .power import linkage_power
@@ -478,9 +478,9 @@ class Linkage:
         ``stroke = (start, end)`` (default: a crank's whole turn from the drawing, an
         actuator's or slider's drawing value to 1.5 times it) at constant ``speed`` (rad/s
         or m/s); the table holds every coordinate, the drive's effort and every joint's
-        reaction."""
+        reaction, with joint friction where the linkage has it (its ``mu_<key>``,
+        ``rpin_<key>``, ``cv_<key>`` among the scene's parameters)."""
         from ..scenes.linkage_scene import linkage_scene
-        no_friction_in_scenes(self)  # a scene's programs have no joint friction yet: refused, not ignored
         return linkage_scene(self, stroke, speed, summary)
 
 

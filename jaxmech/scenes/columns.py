@@ -22,7 +22,7 @@ from ..kinematics import point_kinematics
 from ..options import SolverOptions
 from ..status import Status
 from .evaluation import SCENE_OPTIONS, outputs_stage, scene_motion, stroke_stage
-from .outputs import output_units
+from .outputs import merged_status, output_units, sample_status
 
 if TYPE_CHECKING:  # a Scene is only read here (its mechanism, units, outputs)
     from ..kinematics import Motion
@@ -169,8 +169,18 @@ class LazyColumns(Mapping):
                 pts = jax.vmap(lambda q, qd, qdd, u, ud, udd: point_kinematics(mech, tuple(mech.points), self._p, q, qd, qdd, u, ud, udd))(
                     mo.q, mo.q_dot, mo.q_ddot, mo.u, mo.u_dot, mo.u_ddot)
                 mo = dataclasses.replace(mo, points=pts)
-            self._read["outputs"] = table_columns(scene, mo, scene.outputs(self._p, mo))
+            outs, own = sample_status(scene, self._p, mo)
+            self._read["outputs"] = table_columns(scene, mo, outs)
+            if own is not None:
+                self._read["status"] = merged_status(self._mo.status, own)
         return self._read["outputs"][name]
+
+    @property
+    def outputs_status(self):
+        """The samples' status with the outputs' own (``outputs.Outputs.status``: a linkage
+        jammed by joint friction) where the outputs were read and declare one; None
+        otherwise (the motion's status stands)."""
+        return self._read.get("status")
 
     def __iter__(self):
         return iter(self._names)

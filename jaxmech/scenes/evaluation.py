@@ -15,6 +15,7 @@ rounds differently: sma_flap's accelerations moved by an ulp).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import warnings
 from typing import NamedTuple
@@ -31,10 +32,10 @@ from ..options import SolverOptions
 from ..solution import Solution
 from ..status import Status
 from ..xla import jit
-from .outputs import run_outputs
+from .outputs import merged_status, run_outputs, sample_status
 from .outputs import output_units as scene_output_units
 
-__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "scene_outputs", "stroke_stage", "repair_stage", "scene_repair", "repaired_part", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
+__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "scene_outputs", "scene_outputs_status", "stroke_stage", "repair_stage", "scene_repair", "repaired_part", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
 
 #: Solver options of a scene's stroke wherever it is evaluated (``run_scene``, sweeps,
 #: design, the live view) unless the caller gives its own: 256 anchors.
@@ -153,18 +154,25 @@ def scene_outputs(scene, p, mo: Motion) -> dict:
     """The scene's outputs for every design of a ``scene_motion``: ``{name: (values (D, N),
     unit)}`` in the scene's column order (``scene.outputs`` is written for one design: it is
     vmapped here); ``{}`` for a scene without outputs."""
+    return scene_outputs_status(scene, p, mo)[0]
+
+
+def scene_outputs_status(scene, p, mo: Motion) -> tuple:
+    """``(scene_outputs, status)``: the outputs and the samples' status ``(D, N)`` with the
+    outputs' own where they declare one (``outputs.Outputs.status``: a sample the motion
+    solved but the outputs could not evaluate), else ``mo.status`` itself."""
     if scene.outputs is None:
-        return {}
+        return {}, mo.status
     units: dict = {}  # read from what the one-design function returns while it is traced
 
     def one(p1, mo1):
-        outs = scene.outputs(p1, mo1)
+        outs, own = sample_status(scene, p1, mo1)
         units.update((k, unit) for k, (_, unit) in outs.items())
-        return {k: jnp.broadcast_to(jnp.asarray(v), mo1.t.shape) for k, (v, _) in outs.items()}
+        return {k: jnp.broadcast_to(jnp.asarray(v), mo1.t.shape) for k, (v, _) in outs.items()}, own
 
     p = {k: jnp.asarray(v, mo.q.dtype) for k, v in p.items()}
-    values = jax.vmap(one)(p, mo)
-    return {k: (values[k], unit) for k, unit in units.items()}
+    values, own = jax.vmap(one)(p, mo)
+    return {k: (values[k], unit) for k, unit in units.items()}, merged_status(mo.status, own)
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2, 3))
@@ -197,11 +205,15 @@ def repaired_part(part: StrokePart, p, repair_rows, size: int | None = None) -> 
 @functools.partial(jit, static_argnums=(0, 1, 2))
 def outputs_stage(scene, points: int, with_outputs: bool, p, part):
     """The second program: ``(motion, {output name: values (D, N)})`` from ``stroke_stage``'s
-    ``part`` (``{}`` without outputs)."""
+    ``part`` (``{}`` without outputs); the motion's status takes the outputs' own where
+    they declare one (``outputs.Outputs.status``)."""
     mo, _ = scene_kinematics(scene, points, p, part)
     if not with_outputs:
         return mo, {}
-    return mo, {k: v for k, (v, _) in scene_outputs(scene, p, mo).items()}
+    outs, status = scene_outputs_status(scene, p, mo)
+    if status is not mo.status:  # (outputs without a status of their own: the program is unchanged)
+        mo = dataclasses.replace(mo, status=status)
+    return mo, {k: v for k, (v, _) in outs.items()}
 
 
 def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs: bool, p, robust: bool = True):

@@ -2,12 +2,19 @@
 
 The table holds every coordinate (with its rates), the drive's torque or force and every
 joint's reaction (``F_<joint>_x``, ``F_<joint>_y``; a slider's moment ``M_<joint>``), from
-the per-body Newton-Euler equations at every sample of the stroke.
+the per-body Newton-Euler equations at every sample of the stroke.  With joint friction
+(``Linkage(friction=...)``, a file's ``[friction]``) the effort and the reactions include
+it, by the law and solve of ``Linkage.inverse_dynamics`` (each joint's sign over the
+stroke's own speed scale); a sample that friction jams (its Newton does not converge: no
+effort drives the linkage that way) has status ``MAX_STEPS``, its row NaN in the table.
+The friction parameters (``mu_<key>``, ``rpin_<key>``, ``cv_<key>``) are the scene's, so
+``--set mu_B=0.2`` and sweeps over them work.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import re
 from pathlib import Path
@@ -16,16 +23,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..dynamics.friction import friction_reactions, friction_status, joint_speeds, stroke_signs
 from ..dynamics.joints import Prismatic, joint_name
 from ..dynamics.reactions import joint_reactions
 from ..dynamics.virtual_power import driving_effort, loaded_state
 from ..linkage.files import read_linkage_file
-from ..linkage.friction import no_friction_in_scenes
 from ..linkage.spec import Linkage
 from ..linkage.stroke_file import FileStroke, read_stroke, stroke_samples
 from ..status import Status, status_counts
 from .base import Scene, SceneResult, run_scene
-from .outputs import Outputs
+from .outputs import STATUS, Outputs, merged_status
 
 __all__ = ["linkage_scene", "scene_from_file", "FileScene", "run_file_scene", "point_columns", "PARAMETER_UNITS"]
 
@@ -34,12 +41,17 @@ PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", 
                    "Fx_": "N", "Fy_": "N", "M_": "N m", "g": "m/s^2",
                    # springs and dampers (linkage.elements)
                    "k_": "N/m", "L0_": "m", "F0_": "N", "kt_": "N m/rad", "phi0_": "rad", "Lg_": "m", "n_": "-",
-                   "c_": "N s/m", "ct_": "N m s/rad"}
+                   "c_": "N s/m", "ct_": "N m s/rad",
+                   # joint friction (linkage.friction): a pin's cv_ in N m s/rad, a guide's in N s/m (_unit)
+                   "mu_": "-", "rpin_": "m"}
 
 
-def _unit(name: str) -> str:
+def _unit(name: str, lk: Linkage | None = None) -> str:
     if name == "g":
         return "m/s^2"
+    if name.startswith("cv_") and lk is not None and lk.friction is not None:  # viscous friction: by its joint's kind
+        pins = {fj.damping for fj in lk.friction.joints if fj.radius is not None}
+        return "N m s/rad" if name in pins else "N s/m"
     for prefix, unit in PARAMETER_UNITS.items():
         if name.startswith(prefix):
             return unit
@@ -82,19 +94,48 @@ def _outputs(lk: Linkage) -> Outputs:
         def one(q, u, ud, udd, qd, qdd, t):
             return joint_reactions(model, loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd))
 
-        eff, forces, moments = jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t)
-        out = {f"effort_{_column(name)}": eff[:, k] for k, name in enumerate(mech.inputs)}
-        for j in model.joints:
-            name = joint_name(j)
-            col = _column(name)
-            out[f"F_{col}_x"] = jnp.real(forces[name])
-            out[f"F_{col}_y"] = jnp.imag(forces[name])
-            if isinstance(j, Prismatic):
-                out[f"M_{col}"] = moments[name]
-        return out
+        return _columns(model, *jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t))
 
+    if lk.friction is not None:
+        return Outputs(functools.partial(_friction_outputs, lk), _output_units(lk), status=True)
     parts = {f"effort_{_column(name)}": (lambda p, mo, k=k: efforts(p, mo)[:, k]) for k, name in enumerate(mech.inputs)}
     return Outputs(outputs, _output_units(lk), parts)
+
+
+def _friction_outputs(lk: Linkage, p, mo) -> dict:
+    """``_outputs``' columns of a linkage with joint friction, and each sample's status: the
+    law and solve of ``dynamics.inverse_dynamics`` along a stroke (``friction.joint_speeds``
+    at every sample, their signs over the stroke's own speed scale, ``stroke_signs``, then
+    ``friction_reactions`` per sample); ``MAX_STEPS`` where friction's Newton does not
+    converge (jammed), its values there finite placeholders (0) for the status to mask."""
+    model, fr = lk.model, lk.friction
+    ok = mo.status == Status.CONVERGED
+    w = jax.vmap(lambda q, u, qd, ud: joint_speeds(model, fr, q, u, p, qd, ud))(mo.q, mo.u, mo.q_dot, mo.u_dot)
+
+    def one(q, u, ud, udd, qd, qdd, t, d1, signs, speeds):
+        st = loaded_state(model, q, u, ud, udd, p, t, q_dot=qd, q_ddot=qdd)
+        fres = friction_reactions(model, fr, st, signs, speeds)
+        return driving_effort(model, st, d1) + fres.efforts, fres.forces, fres.moments, fres.converged
+
+    eff, forces, moments, conv = jax.vmap(one)(mo.q, mo.u, mo.u_dot, mo.u_ddot, mo.q_dot, mo.q_ddot, mo.t, mo.dq_du,
+                                               stroke_signs(fr, w, ok), w)
+    out = {k: jnp.where(conv, v, 0.0) for k, v in _columns(model, eff, forces, moments).items()}
+    out[STATUS] = friction_status(mo.status, conv)
+    return out
+
+
+def _columns(model, eff, forces, moments) -> dict:
+    """The output columns ``(N,)`` from the samples' efforts ``(N, dof)`` and the joints'
+    ``{joint: F}`` forces and ``{joint: M}`` moments (``joint_reactions``' form)."""
+    out = {f"effort_{_column(name)}": eff[:, k] for k, name in enumerate(model.mechanism.inputs)}
+    for j in model.joints:
+        name = joint_name(j)
+        col = _column(name)
+        out[f"F_{col}_x"] = jnp.real(forces[name])
+        out[f"F_{col}_y"] = jnp.imag(forces[name])
+        if isinstance(j, Prismatic):
+            out[f"M_{col}"] = moments[name]
+    return out
 
 
 def _drawing(lk: Linkage):
@@ -118,11 +159,31 @@ def _drawing(lk: Linkage):
     return drawing
 
 
+def _friction_validation(lk: Linkage):
+    """The scene's ``validate``: friction's values must not be negative (None without friction)."""
+    if lk.friction is None:
+        return None
+    names = lk.friction.parameters
+
+    def validate(p):
+        bad = [k for k in names if float(p[k]) < 0.0]
+        if bad:
+            raise ValueError(f"{lk.name}: joint friction's {bad[0]} = {float(p[bad[0]]):.6g} must not be negative")
+
+    return validate
+
+
+def _meaning(name: str, lk: Linkage) -> str:
+    """What a linkage parameter is, in the scene's parameter list."""
+    if lk.friction is not None and name in lk.friction.parameters:
+        return "joint friction"
+    return "drawing" if _unit(name) in ("m", "rad") else "mass property or load"
+
+
 def linkage_scene(lk: Linkage, stroke=None, speed: float = 1.0, summary: str | None = None) -> Scene:
     """The ``Scene`` of a linkage with one driver: its drawing's parameters as defaults, the
     stroke ``(start, end)`` of the input (default: a crank's whole turn from the drawing, an
     actuator's or slider's drawing value to 1.5 times it), at constant `speed`."""
-    no_friction_in_scenes(lk)  # (run_scene, sweep_scene, the design functions and export would leave it out)
     mech = lk.mechanism
     if mech.dof != 1:
         raise ValueError(f"{lk.name}: a scene has one driven input; this linkage has {mech.dof} ({list(mech.inputs)})")
@@ -138,9 +199,9 @@ def linkage_scene(lk: Linkage, stroke=None, speed: float = 1.0, summary: str | N
         if np.all(np.isfinite(np.asarray(sol.q[0]))):
             guess = np.asarray(sol.q[0])
     units = {n: _coordinate_unit(lk, n) for n in mech.coords + mech.inputs}
-    params = {k: (_unit(k), "drawing" if _unit(k) in ("m", "rad") else "mass property or load") for k in lk.params}
+    params = {k: (_unit(k, lk), _meaning(k, lk)) for k in lk.params}
     return Scene(
-        name=lk.name,
+        name=lk.name, validate=_friction_validation(lk),
         summary=summary or f"linkage {lk.name}: {len(lk.links)} links, driven by {name} from {u0:.6g} to {u1:.6g}",
         mechanism=mech, defaults=lk.params, guess=lambda p, g=jnp.asarray(guess): g,
         stroke=lambda p: (u0, u1), speed=float(speed), units=units, outputs=_outputs(lk), drawing=_drawing(lk),
@@ -185,10 +246,6 @@ def scene_from_file(path) -> FileScene:
     path = Path(path)
     data = path.read_bytes()
     lk, table = read_linkage_file(path)
-    if lk.friction is not None:  # a scene's programs have no joint friction yet: refused, not left out
-        raise ValueError(f"{path.name}: [friction]: the command line does not take joint friction yet (its scenes would "
-                         "leave it out); take the [friction] table out to run without it, or load the file in Python "
-                         "(jaxmech.load_linkage) for inverse_dynamics, holding and power with friction")
     name = lk.mechanism.inputs[0] if lk.mechanism.dof == 1 else ""
     try:
         drive = read_stroke(table, "m" if name in lk.mechanism.lengths else "rad", path.parent)
@@ -216,9 +273,19 @@ def run_file_scene(scene: Scene, points: int = 101, **overrides) -> SceneResult:
         raise ValueError(f"{scene.name}: its [stroke] cannot be assembled: {len(bad)} of {status.size} samples fail, "
                          f"first at {uname} = {float(mo.u[bad[0], 0]):.6g} ({status_counts(status)}); "
                          "change the stroke or the link lengths")
-    values = jax.jit(scene.outputs.fn)(p, mo)
+    if scene.outputs.status:  # joint friction: its status too, MAX_STEPS where it jams the linkage
+        values, own = jax.jit(lambda p_, mo_: _values_and_status(scene.outputs, p_, mo_))(p, mo)
+        mo = dataclasses.replace(mo, status=np.asarray(merged_status(mo.status, own)))
+    else:
+        values = jax.jit(scene.outputs.fn)(p, mo)
     outputs = {k: (np.asarray(values[k]), unit) for k, unit in scene.outputs.units.items()}
     return SceneResult(scene=scene, params=p, motion=mo, outputs=outputs)
+
+
+def _values_and_status(outputs: Outputs, p, mo):
+    """``({name: values}, status)`` of ``Outputs.evaluate`` (no unit strings: a compiled program's result)."""
+    outs, own = outputs.evaluate(p, mo)
+    return {k: v for k, (v, _) in outs.items()}, own
 
 
 def point_columns(motion) -> dict:

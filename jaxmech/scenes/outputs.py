@@ -24,8 +24,12 @@ import jax
 import jax.numpy as jnp
 
 from ..kinematics import Motion
+from ..status import Status
 
-__all__ = ["Outputs", "abstract_motion", "output_units", "run_outputs"]
+__all__ = ["Outputs", "STATUS", "abstract_motion", "output_units", "run_outputs", "sample_status", "merged_status"]
+
+#: The key under which an ``Outputs(..., status=True)`` function returns its samples' status.
+STATUS = "status"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -39,6 +43,12 @@ class Outputs:
     - `parts`: optional ``{name: fn(p, motion) -> values (N,)}``: a lighter function for one
       output alone, equal to `fn`'s (e.g. a drive's effort by virtual power, without every
       joint's reaction), used where only some outputs are read (``design.scene_problem``).
+    - `status`: whether `fn` also returns, under ``STATUS``, each sample's ``Status``
+      ``(N,)`` of its outputs: ``CONVERGED`` where they hold, another code where the
+      position converged but the outputs could not be evaluated (a linkage jammed by joint
+      friction: ``MAX_STEPS``).  The scene's status is then the motion's where that is not
+      ``CONVERGED``, else this (``sample_status``), wherever the outputs are compiled in
+      (``run_scene``, the sweeps, ``design_columns``), and its table masks those samples.
 
     Calling it returns ``{name: (values, unit)}`` in the order of `units`; ``ValueError``
     names an output `fn` returns without declaring it, or a declared one it does not return.
@@ -47,6 +57,7 @@ class Outputs:
     fn: Callable
     units: Mapping[str, str]
     parts: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
+    status: bool = False
 
     def __post_init__(self):
         if not callable(self.fn):
@@ -64,14 +75,38 @@ class Outputs:
         """Output `name` alone: its part's function where one is given, else `fn`'s value."""
         return self.parts[name](p, motion) if name in self.parts else self.fn(p, motion)[name]
 
-    def __call__(self, p, motion) -> dict:
-        values = self.fn(p, motion)
-        missing = [k for k in self.units if k not in values]
+    def evaluate(self, p, motion) -> tuple:
+        """``({name: (values, unit)}, status (N,) or None)``: the outputs as a call gives
+        them, and their own per-sample status where `status` is declared (else None)."""
+        values = dict(self.fn(p, motion))
+        own = values.pop(STATUS, None) if self.status else None
+        missing = [k for k in self.units if k not in values] + ([STATUS] if self.status and own is None else [])
         extra = [k for k in values if k not in self.units]
         if missing or extra:
             raise ValueError(f"Outputs of {getattr(self.fn, '__name__', self.fn)!r}: declared but not returned {missing}, "
                              f"returned but not declared {extra}")
-        return {k: (values[k], unit) for k, unit in self.units.items()}
+        return {k: (values[k], unit) for k, unit in self.units.items()}, own
+
+    def __call__(self, p, motion) -> dict:
+        return self.evaluate(p, motion)[0]
+
+
+def sample_status(scene, p, motion) -> tuple:
+    """``(outputs {name: (values, unit)}, own status (N,) or None)`` of one design: the
+    scene's outputs at its `motion`, and their own per-sample status where they declare
+    one (``Outputs.status``), None otherwise (the motion's status stands: nothing is added
+    to the program).  ``merged_status`` combines the two."""
+    if isinstance(scene.outputs, Outputs):
+        return scene.outputs.evaluate(p, motion)
+    return scene.outputs(p, motion), None
+
+
+def merged_status(status, own):
+    """The samples' status: `status` (the motion's) where it is not ``CONVERGED``, else
+    the outputs' `own` (``sample_status``); `status` itself where `own` is None."""
+    if own is None:
+        return status
+    return jnp.where(status == Status.CONVERGED, jnp.asarray(own, status.dtype), status)
 
 
 def abstract_motion(scene, points: int = 2) -> Motion:
