@@ -17,8 +17,9 @@
 - the slider-crank with ``mu = 3`` in its guide: where the rod pushes the block against
   its load at a steep angle friction jams it (no effort drives it: the friction Newton has
   no root), those samples alone have status ``MAX_STEPS`` (NaN in the table), every other
-  sample is ``inverse_dynamics``', and the effort's gradient in ``mu`` over the others is
-  finite and agrees with central differences;
+  sample is ``inverse_dynamics``', the effort's gradient in ``mu`` over the others is
+  finite and agrees with central differences, and ``scene_problem``'s rows over the jammed
+  stroke are not finite and a ``scene_figure`` over it is not ok (both finite at ``mu = 0.5``);
 - a forward run of the pendulum with pivot friction, released (no motor, no load): its
   ``Trajectory.dynamics`` applies the run's friction, so the effort balancing the run's
   accelerations is zero (the run's actual effort), the pin force is ``m (a_G - g)`` and
@@ -46,7 +47,8 @@ import test_friction_files as PRESS  # noqa: E402
 import test_friction_power as SC  # noqa: E402
 from jaxmech.cli import main  # noqa: E402
 from jaxmech.scenes import run_scene  # noqa: E402
-from jaxmech.scenes.columns import design_columns  # noqa: E402
+from jaxmech.design import scene_figure, scene_problem  # noqa: E402
+from jaxmech.scenes.columns import design_columns, design_motion  # noqa: E402
 from jaxmech.sweep import sweep_scene  # noqa: E402
 
 OMEGA = 2.0  # rad/s, the pendulum's drive speed
@@ -205,6 +207,26 @@ def test_samples_jammed_by_friction_are_marked_and_their_neighbours_are_untouche
     h = 1e-5
     fd = (float(total(3.0 + h)) - float(total(3.0 - h))) / (2 * h)
     assert np.isfinite(g) and abs(fd) > 1.0 and abs(g - fd) <= 1e-5 * abs(fd), (g, fd)
+
+    # a refinement's rows over a jammed stroke are not finite (the design is not ok); over a free one they are
+    (name,) = [k for k in table if k.startswith("effort_")]
+    problem = scene_problem(scene, {"mu_block_B": (0.1, 3.0)}, peak=name, points=73)
+
+    @jax.jit
+    def peak_rows(mu):
+        q = {**p, "mu_block_B": mu}
+        mo, _ = design_motion(scene, 73, q)
+        return problem.rows(q, mo).peak
+
+    assert np.all(np.isnan(np.asarray(peak_rows(3.0))))
+    free = np.asarray(peak_rows(0.5))
+    assert np.all(np.isfinite(free)) and np.max(free) > 10.0
+    # and a design figure over it is not ok
+    figure = scene_figure(scene, lambda c, p_: jnp.max(c[name]), points=73)
+    value, ok = figure({"mu_block_B": 3.0})
+    assert not bool(ok) and np.isnan(float(value))
+    value, ok = figure({"mu_block_B": 0.5})
+    assert bool(ok) and abs(float(value) - np.max(free)) <= 1e-12 * np.max(free)
 
 
 # --------------------------------------------------------------------------- (e) Trajectory.dynamics

@@ -132,7 +132,12 @@ def scene_problem(scene, bounds: Mapping[str, tuple[float, float]], *, peak, lim
                 le.append(low - v)
             if high is not None:
                 le.append(v - high)
-        return Stated(peak=jnp.ravel(peak_fn(cols, p)), le=jnp.concatenate(le) if le else None)
+        stated = Stated(peak=jnp.ravel(peak_fn(cols, p)), le=jnp.concatenate(le) if le else None)
+        if cols.outputs_status is not None:  # a sample jammed by joint friction: no finite row, so the design is not ok
+            held = jnp.all(cols.outputs_status == Status.CONVERGED)
+            rows_ = {f: jnp.where(held, v, jnp.nan) for f, v in zip(stated._fields, stated) if f in ("peak", "le") and v is not None}
+            stated = stated._replace(**rows_, ok=held)
+        return stated
 
     return StrokeProblem(mechanism=scene.mechanism, names=tuple(bounds), params=lambda x: {**base, **x}, **stroke,
                          guess=lambda p, u: jnp.asarray(scene.guess(p)), rows=rows, options=options, continuation=True)
