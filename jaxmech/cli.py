@@ -42,7 +42,7 @@ from .cli_parser import PROG, parser
 from .cli_values import UsageError
 from .names import did_you_mean
 
-__all__ = ["main"]
+__all__ = ["main", "is_linkage_file", "mistakes_of", "write_csv"]
 
 
 # --------------------------------------------------------------------------- setup
@@ -61,12 +61,13 @@ def _setup_jax():
 
 
 # --------------------------------------------------------------------------- shared steps
-def _is_file(name: str) -> bool:
+def is_linkage_file(name: str) -> bool:
+    """Whether the command line reads `name` as a linkage file (TOML or JSON) rather than a scene."""
     return name.lower().endswith((".toml", ".json"))
 
 
 @contextlib.contextmanager
-def _mistakes_of(source: str):
+def mistakes_of(source: str):
     """A ``ValueError`` inside (a file's, a scene's, a design's) becomes a one-line
     ``UsageError`` that names the linkage file when `source` is one."""
     try:
@@ -74,24 +75,24 @@ def _mistakes_of(source: str):
     except ValueError as e:
         msg = " ".join(str(e).split())
         name = Path(source).name
-        raise UsageError(msg if not _is_file(source) or msg.startswith(f"{name}:") else f"{name}: {msg}") from None
+        raise UsageError(msg if not is_linkage_file(source) or msg.startswith(f"{name}:") else f"{name}: {msg}") from None
 
 
 def _scene(name):
     from .scenes import get_scene, scene_names
 
-    if _is_file(name):
+    if is_linkage_file(name):
         from .scenes.linkage_scene import scene_from_file
 
         try:
-            with _mistakes_of(name):
+            with mistakes_of(name):
                 return scene_from_file(name)
         except OSError as e:
             raise UsageError(f"cannot read {name}: {e.strerror or e}") from None
     known = scene_names()
     if name not in known:
         raise UsageError(f"unknown scene {name!r}; {did_you_mean(name, known, 'known scenes')}")
-    with _mistakes_of(name):
+    with mistakes_of(name):
         return get_scene(name)
 
 
@@ -99,7 +100,7 @@ def _run(source: str, scene, points, overrides):
     from .scenes.linkage_scene import run_file_scene  # run_scene, or a file's rocking or sampled stroke
 
     overrides = values.overrides(scene, overrides)
-    with _mistakes_of(source):
+    with mistakes_of(source):
         return run_file_scene(scene, points, **overrides)
 
 
@@ -199,8 +200,8 @@ def _cmd_export(args) -> int:
     scene = _scene(args.scene)
     overrides = values.overrides(scene, args.overrides)
     # a linkage file is passed on as its path: its layers are named after its links
-    source = args.scene if _is_file(args.scene) else scene
-    with _mistakes_of(args.scene):
+    source = args.scene if is_linkage_file(args.scene) else scene
+    with mistakes_of(args.scene):
         at = None if args.at is None else input_value(scene, args.at)
         if args.stroke:
             export_stroke(source, out, at=at, params=overrides, points=args.points, units=args.units)
@@ -224,7 +225,7 @@ def _sweep_out(args) -> Path:
         raise UsageError("--range is for --random designs; a grid takes --grid NAME=START:STOP:N")
     if args.vary is not None and (args.ranges or args.random is None):
         raise UsageError("--vary chooses the default ranges of --random designs; with --range, name every parameter to vary")
-    name = Path(args.scene).stem if _is_file(args.scene) else args.scene  # here, not beside the file
+    name = Path(args.scene).stem if is_linkage_file(args.scene) else args.scene  # here, not beside the file
     default = f"{name}_figures.parquet" if args.figures else f"{name}_sweep.csv"
     out = Path(args.out or default)
     if out.suffix.lower() == ".parquet":
@@ -263,7 +264,7 @@ def _cmd_sweep(args) -> int:
         designs = dict(grid=args.grid_values, table=None)
     out = args.out_path
     figures = Figures(functions=values.figure_functions(args.figure_fns)) if args.figures else None
-    with _mistakes_of(args.scene):
+    with mistakes_of(args.scene):
         if out.suffix.lower() == ".parquet":
             res = sweep_dataset(scene, out, **designs, figures=figures, points=args.points, chunk_size=args.chunk_size,
                                 progress=None if args.progress else False)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import _is_file, _mistakes_of, write_csv
+from .cli import is_linkage_file, mistakes_of, write_csv
 from .cli_values import UsageError
 from .names import did_you_mean
 
@@ -27,10 +27,10 @@ def parameter_units(lk, sim) -> dict[str, str]:
     """``{parameter: SI unit}`` of every parameter ``--set`` may change: the linkage's and the
     run's own (the motor's, ``torque``)."""
     from .dynamics.joints import Revolute
-    from .linkage.simulate_file import _friction_joints
+    from .linkage.simulate_file import friction_joints
     from .scenes.linkage_scene import PARAMETER_UNITS
 
-    joints = _friction_joints(lk) if getattr(lk, "friction", None) is not None else {}
+    joints = friction_joints(lk) if getattr(lk, "friction", None) is not None else {}
 
     def unit(name):
         if name == "g":
@@ -114,7 +114,7 @@ def simulate_command(args) -> int:
     from .linkage.values import read_number
 
     source = args.file
-    if not _is_file(source):
+    if not is_linkage_file(source):
         raise UsageError(f"simulate runs a linkage file (FILE.toml or FILE.json with a [simulate] table), got {source!r}")
     times = {}
     for key in ("duration", "step"):  # the command line's own mistakes first, without the file's name
@@ -124,13 +124,13 @@ def simulate_command(args) -> int:
             except ValueError as e:
                 raise UsageError(str(e)) from None
     try:
-        with _mistakes_of(source):
+        with mistakes_of(source):
             lk, _, table = read_linkage_tables(source)
             sim = read_simulate(table, lk, **times)
     except OSError as e:
         raise UsageError(f"cannot read {source}: {e.strerror or e}") from None
     params = _overrides(lk, sim, args.overrides)
-    with _mistakes_of(source):
+    with mistakes_of(source):
         tr, p = run_simulation(lk, sim, params)
         cols = simulation_columns(lk, sim, tr, p, reactions=getattr(lk, "friction", None) is None)
     out = Path(args.out)

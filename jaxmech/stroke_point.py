@@ -118,6 +118,18 @@ CHECKED_STEPS = 3
 FRESH_STEPS = 6
 
 
+class _StepCarry(NamedTuple):
+    """``checked_step``'s loop state: steps taken `i`, the iterate `q`, its residual `r`
+    and Jacobian `js`, the next (block-solved) step `dz`, whether `q` is finite."""
+
+    i: jax.Array
+    q: jax.Array
+    r: jax.Array
+    js: jax.Array
+    dz: jax.Array
+    finite: jax.Array
+
+
 def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHECKED_STEPS) -> CheckedStep:
     """Plain Newton steps from a close (predicted) guess (one, or up to `most` (may be
     traced) while the next one is not yet within the lean step test; each capped at
@@ -134,24 +146,23 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
     r, js = evaluate(guess)
     tiny = float(jnp.finfo(dtype).tiny)
 
-    def more(c):
-        i, _, r_, _, dz_, finite_ = c
-        close = (small_max(jnp.abs(dz_)) <= xtol) & (small_norm(r_) <= ftol)
-        return (i < most) & finite_ & ((i == 0) | ~close)
+    def more(c: _StepCarry):
+        close = (small_max(jnp.abs(c.dz)) <= xtol) & (small_norm(c.r) <= ftol)
+        return (c.i < most) & c.finite & ((c.i == 0) | ~close)
 
     one = isinstance(most, int) and most == 1
 
-    def step(c):
-        i, q_, _, _, dz_, _ = c
+    def step(c: _StepCarry) -> _StepCarry:
+        q_, dz_ = c.q, c.dz
         q_ = q_ - dz_ * jnp.minimum(1.0, opts.max_step / jnp.maximum(small_max(jnp.abs(dz_)), tiny)) * s
         if not one:  # angles within half a turn of the guess (as assemble's); the tests see it
             q_ = towards(mech, q_, guess)
         finite_ = jnp.all(jnp.isfinite(q_))
         q_ = where(finite_, q_, jnp.zeros_like(q_))
         r_, js_ = evaluate(q_)
-        return i + 1, q_, r_, js_, solve_blocks(js_, r_, order), finite_
+        return _StepCarry(c.i + 1, q_, r_, js_, solve_blocks(js_, r_, order), finite_)
 
-    init = (jnp.zeros((), jnp.int32), guess, r, js, solve_blocks(js, r, order), jnp.asarray(True))
+    init = _StepCarry(jnp.zeros((), jnp.int32), guess, r, js, solve_blocks(js, r, order), jnp.asarray(True))
     if one:  # straight-line code: the robust program's (it re-solves the rest)
         steps, q, r, js, dz, finite_q = step(init)
     else:
@@ -164,7 +175,7 @@ def checked_step(mech: Mechanism, opts: SolverOptions, u, p, guess, b0, most=CHE
     qf = where(ok, q - dz * s, q)
     # ok feeds every output: computed once (finite here), it saves ~20% of this step on CPU
     packed = unfused(jnp.concatenate([qf, ok.astype(dtype)[None]]))
-    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br, steps, init[3])
+    return CheckedStep(q, packed[:-1], packed[-1] > 0.5, rn, cond, br, steps, init.js)
 
 
 # --------------------------------------------------------------------------- fresh assembly
@@ -204,6 +215,17 @@ def score(status):
     return where(status == Status.CONVERGED, 2, where(status == Status.BRANCH, 1, 0))
 
 
+class _Starts(NamedTuple):
+    """``multistart``'s loop state: the next start `j`, the `best` answer so far, its
+    `score`, the start `j_best` it came from, whether the last start run `stalled`."""
+
+    j: jax.Array
+    best: NewtonResult
+    score: jax.Array
+    j_best: jax.Array
+    stalled: jax.Array
+
+
 def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, target, inputs_finite: bool = False,
                skip=None, after_stall=None, budget=None, fold=None) -> tuple[NewtonResult, jax.Array]:
     """``newton.newton`` from ``starts[j]`` (``(S, m)``) with the step cap ``caps[j]``, for
@@ -224,14 +246,13 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
     last = starts.shape[0] - 1
     after = jnp.zeros((last + 1,), bool) if after_stall is None else jnp.asarray(after_stall)
 
-    def wanted(carry):
-        j, _, best_score, _, _ = carry
-        return (j < count) & (best_score < 2)
+    def wanted(c: _Starts):
+        return (c.j < count) & (c.score < 2)
 
-    def attempt(carry):
-        j, best, best_score, j_best, stalled = carry
+    def attempt(c: _Starts) -> _Starts:
+        j, best, best_score = c.j, c.best, c.score
         k = jnp.clip(j, 0, last)
-        run = wanted(carry) & ~(after[k] & stalled)
+        run = wanted(c) & ~(after[k] & c.stalled)
         start = starts[k]
         if fold is not None:
             mirrored = fold[k]  # run only from a root on another branch
@@ -240,17 +261,17 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
         res = newton(mech, opts, u, p, start, target, caps[k].astype(dtype), skip=~run, inputs_finite=inputs_finite, budget=budget)
         take = run & (score(res.status) > best_score)
         pick = lambda a, b: where(take, a, b)  # noqa: E731
-        stalled = where(run, res.status == Status.INFEASIBLE, stalled)
-        return j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score), pick(k, j_best), stalled
+        stalled = where(run, res.status == Status.INFEASIBLE, c.stalled)
+        return _Starts(j + 1, jax.tree_util.tree_map(pick, res, best), pick(score(res.status), best_score), pick(k, c.j_best), stalled)
 
     zero = jnp.zeros((), dtype)
     branch0 = branch_value(mech, starts[0], u, p) if has_branch(mech) else jnp.asarray(jnp.nan, dtype)
     none = NewtonResult(starts[0], jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
                         branch0, jnp.zeros((), jnp.int32))
     first = jnp.asarray(-1) if skip is None else where(skip, 2, -1)
-    init = (jnp.zeros((), jnp.int32), none, first, jnp.zeros((), jnp.int32), jnp.asarray(False))
-    _, best, _, j_best, _ = jax.lax.while_loop(wanted, attempt, per_lane(init, jnp.all(jnp.isfinite(starts[0]))))
-    return best, j_best
+    init = _Starts(jnp.zeros((), jnp.int32), none, first, jnp.zeros((), jnp.int32), jnp.asarray(False))
+    out = jax.lax.while_loop(wanted, attempt, per_lane(init, jnp.all(jnp.isfinite(starts[0]))))
+    return out.best, out.j_best
 
 
 def fresh_starts(mech: Mechanism, opts: SolverOptions, ref, p) -> tuple[jax.Array, jax.Array]:

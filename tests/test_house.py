@@ -249,3 +249,58 @@ def test_the_public_face_is_small_and_shows_no_internal_module():
     modules = {n for n in shown if isinstance(getattr(jaxmech, n), types.ModuleType)}
     assert modules == {"actuators", "design", "dynamics", "linkage", "scenes", "sweep"}, modules
     assert set(shown) - modules == set(jaxmech.__all__)
+
+
+#: A loop's state position in ``jax.lax``'s loops: ``while_loop(cond, body, init)``,
+#: ``fori_loop(lo, hi, body, init)``, ``scan(f, init, xs)``.
+LOOP_INIT = {"while_loop": 2, "fori_loop": 3, "scan": 1}
+
+
+def _tuple_size(node, bound: dict, depth: int = 0):
+    """How many values the loop state `node` packs positionally: a tuple literal, a name
+    bound to one in the same function, or either wrapped by ``per_lane(init, ...)``."""
+    if depth > 5 or node is None:
+        return None
+    if isinstance(node, ast.Tuple):
+        return len(node.elts)
+    if isinstance(node, ast.Name) and node.id in bound:
+        return _tuple_size(bound[node.id], bound, depth + 1)
+    if isinstance(node, ast.Call) and node.args and getattr(node.func, "id", getattr(node.func, "attr", "")) == "per_lane":
+        return _tuple_size(node.args[0], bound, depth + 1)
+    return None
+
+
+def tuple_carries(source: str, where: str = "") -> list:
+    """Every ``while_loop``, ``fori_loop`` or ``scan`` whose state is a tuple of more than
+    ``MAX_RESULTS`` values (a named record says what each field is, and a reordering
+    cannot silently swap two of them)."""
+    tree = ast.parse(source)
+    found = set()
+    for scope in ast.walk(tree):
+        if not isinstance(scope, (*FUNCTIONS, ast.Module)):
+            continue
+        bound = {n.targets[0].id: n.value for n in ast.walk(scope)
+                 if isinstance(n, ast.Assign) and len(n.targets) == 1 and isinstance(n.targets[0], ast.Name)}
+        for call in ast.walk(scope):
+            name = getattr(getattr(call, "func", None), "attr", getattr(getattr(call, "func", None), "id", ""))
+            if not isinstance(call, ast.Call) or name not in LOOP_INIT:
+                continue
+            i = LOOP_INIT[name]
+            init = call.args[i] if len(call.args) > i else next((k.value for k in call.keywords if k.arg in ("init", "init_val")), None)
+            size = _tuple_size(init, bound)
+            if size is not None and size > MAX_RESULTS:
+                found.add(f"{where}:{call.lineno} {name} carries a tuple of {size}")
+    return sorted(found)
+
+
+def test_loop_carries_are_named():
+    found = [f for path in _modules() for f in tuple_carries(path.read_text(), str(path.relative_to(ROOT)))]
+    assert not found, found
+
+
+def test_the_loop_carry_rule_sees_what_it_should():
+    assert tuple_carries("def f():\n    return jax.lax.while_loop(c, b, (0, x, y, z))\n")
+    assert tuple_carries("def f():\n    init = (0, x, y, z, w)\n    return lax.fori_loop(0, 3, b, per_lane(init, ok))\n")
+    assert tuple_carries("def f():\n    return jax.lax.scan(g, (a, b, c, d), xs)\n")
+    assert not tuple_carries("def f():\n    return jax.lax.while_loop(c, b, (0, x, y))\n")
+    assert not tuple_carries("def f():\n    return jax.lax.while_loop(c, b, Carry(0, x, y, z))\n")

@@ -7,7 +7,7 @@ import dataclasses
 import enum
 import functools
 from collections.abc import Callable, Mapping
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -193,6 +193,22 @@ def _default_optimizer():
     return optax.with_extra_args_support(optax.lbfgs())
 
 
+class _FitCarry(NamedTuple):
+    """The fit loop's state: step `k`, per start the parameters `p`, the optimiser's
+    `state`, value `v`, gradient `g`, whether it is `active`, its stop `reason`, its steps
+    `nsteps`, and the value `history` ``(steps + 1, starts)``."""
+
+    k: Any
+    p: Any
+    state: Any
+    v: Any
+    g: Any
+    active: Any
+    reason: Any
+    nsteps: Any
+    history: Any
+
+
 class FitLoop(NamedTuple):
     """What the compiled fit loop returns (``_fit_loop``), a row per start: the final
     designs `params`, objective `value`, ``StopReason`` `reason`, steps taken `nsteps`, and
@@ -263,19 +279,17 @@ def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi
     history = jnp.full((steps + 1, s), jnp.inf, v.dtype).at[0].set(v)
     nsteps = jnp.zeros((s,), jnp.int32)
 
-    def cond(carry):
-        k, *_, active, _reason, _n, _h = carry
-        return (k < steps) & jnp.any(active)
+    def cond(c: _FitCarry):
+        return (c.k < steps) & jnp.any(c.active)
 
-    def body(carry):
-        k, p, state, v, g, active, reason, nsteps, history = carry
-        p, state, v, g, active_new, reason = jax.vmap(step)(p, state, v, g, active, reason, v0)
-        nsteps = nsteps + active.astype(jnp.int32)
-        history = history.at[k + 1].set(v)
-        return k + 1, p, state, v, g, active_new, reason, nsteps, history
+    def body(c: _FitCarry) -> _FitCarry:
+        p, state, v, g, active_new, reason = jax.vmap(step)(c.p, c.state, c.v, c.g, c.active, c.reason, v0)
+        nsteps = c.nsteps + c.active.astype(jnp.int32)
+        history = c.history.at[c.k + 1].set(v)
+        return _FitCarry(c.k + 1, p, state, v, g, active_new, reason, nsteps, history)
 
     k, p, state, v, g, active, reason, nsteps, history = jax.lax.while_loop(
-        cond, body, (0, p, state, v, g, active, reason, nsteps, history)
+        cond, body, _FitCarry(0, p, state, v, g, active, reason, nsteps, history)
     )
     # Rows after the loop ended repeat the final values.
     rows = jnp.arange(steps + 1)[:, None]

@@ -44,7 +44,7 @@ from .friction import friction_key
 from .values import read_number
 
 __all__ = ["SIMULATE_KEYS", "MOTOR_KEYS", "ConstantEffort", "Simulation", "read_simulate", "run_simulation",
-           "simulation_columns"]
+           "simulation_columns", "friction_joints"]
 
 SIMULATE_KEYS = ("duration", "step", "u0", "u_dot0", "friction_speed", "torque", "motor")
 #: ``[simulate.motor]``'s keys and their SI units (``current0`` is a state, not a parameter).
@@ -168,7 +168,7 @@ def _motor(table) -> dict:
     return dict(drive="motor", motor=motor, current0=current0, values=values, units={k: MOTOR_KEYS[k] for k in values})
 
 
-def _friction_joints(lk) -> dict:
+def friction_joints(lk) -> dict:
     """``{joint name or friction key: joint}`` of the joints that carry friction."""
     named = {fj.joint for fj in lk.friction.joints}
     joints = [j for j in lk.model.joints if joint_name(j) in named]
@@ -191,7 +191,7 @@ def _friction_speed(table: Mapping, lk):
             raise ValueError("[simulate] friction_speed is the speed scale of joint friction's sign: this linkage has no "
                              "[friction]; leave it out")
         return None
-    joints = _friction_joints(lk)
+    joints = friction_joints(lk)
     if given is None:
         raise ValueError("[simulate] needs friction_speed with [friction]: the speed scale of friction's sign, about the "
                          "largest joint speed expected (rad/s at a pin, m/s in a guide), e.g. friction_speed = 2.0, or "
