@@ -179,7 +179,13 @@ def _sample(model: Model, quasi_static: bool, names, p, t, u, ud, udd, q, d1, d2
     st = loaded_state(model, q, u, ud, udd, p, t, inertia=not quasi_static, q_dot=qd, q_ddot=qdd)
     tau, lam = balance(model, st)
     nan = lambda x: jnp.where(ok, x, jnp.nan)  # noqa: E731
-    pts = point_kinematics(mech, names, p, qs, qd, qdd, u, ud, udd)
+    # the bodies' centres of mass, which the balance has differentiated twice already
+    known = {}
+    if st.accels is not None:
+        known = {b.position: (st.poses[0][k], st.rates[0][k], st.accels[0][k])
+                 for k, b in enumerate(model.bodies) if isinstance(b.position, str) and b.position in names}
+    pts = point_kinematics(mech, tuple(n for n in names if n not in known), p, qs, qd, qdd, u, ud, udd)
+    pts = {n: known[n] if n in known else pts[n] for n in names}
     out = dict(tau=tau, reactions=lam, q_dot=nan(qd), q_ddot=nan(qdd), points=jax.tree_util.tree_map(nan, pts), joints={},
                joint_moments={}, joint_normals={})
     if model.joints and friction is not None:
