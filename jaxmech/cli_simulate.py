@@ -18,29 +18,13 @@ from .names import did_you_mean
 
 __all__ = ["simulate_command", "parameter_units", "plot_simulation", "summary"]
 
-#: SI units of the joint-friction parameters by prefix (``linkage.friction``); ``cv_`` is
-#: a pin's N m s/rad or a guide's N s/m.
-FRICTION_UNITS = {"mu_": "-", "rpin_": "m"}
-
-
 def parameter_units(lk, sim) -> dict[str, str]:
-    """``{parameter: SI unit}`` of every parameter ``--set`` may change: the linkage's and the
-    run's own (the motor's, ``torque``)."""
-    from .dynamics.joints import Revolute
-    from .linkage.simulate_file import friction_joints
-    from .scenes.linkage_scene import PARAMETER_UNITS
+    """``{parameter: SI unit}`` of every parameter ``--set`` may change: the linkage's (as
+    its scene's: ``scenes.linkage_scene.parameter_unit``, "-" where none) and the run's own
+    (the motor's, ``torque``)."""
+    from .scenes.linkage_scene import parameter_unit
 
-    joints = friction_joints(lk) if getattr(lk, "friction", None) is not None else {}
-
-    def unit(name):
-        if name == "g":
-            return "m/s^2"
-        if name.startswith("cv_") and name[3:] in joints:
-            return "N m s/rad" if isinstance(joints[name[3:]], Revolute) else "N s/m"
-        prefix = next((k for k in (*PARAMETER_UNITS, *FRICTION_UNITS) if name.startswith(k)), None)
-        return {**PARAMETER_UNITS, **FRICTION_UNITS}.get(prefix, "-")
-
-    return {**{k: unit(k) for k in lk.params}, **sim.units}
+    return {**{k: parameter_unit(k, lk) or "-" for k in lk.params}, **sim.units}
 
 
 def _overrides(lk, sim, raw: dict) -> dict[str, float]:
@@ -132,7 +116,7 @@ def simulate_command(args) -> int:
     params = _overrides(lk, sim, args.overrides)
     with mistakes_of(source):
         tr, p = run_simulation(lk, sim, params)
-        cols = simulation_columns(lk, sim, tr, p, reactions=getattr(lk, "friction", None) is None)
+        cols = simulation_columns(lk, sim, tr, p)
     out = Path(args.out)
     csv_path = out / f"{lk.name}_simulate.csv"
     write_csv(cols, csv_path)

@@ -248,8 +248,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     # The jitted batch solve (compiled once per mechanism and options); a dict of scalars is a batch of shape ().
     sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, mechanism_params(model, pj),
                 guess.astype(dtype), options=options)
-    t0, h = jnp.asarray(t0, dtype), jnp.asarray(h, dtype)
-    ok = sol.status == Status.CONVERGED
+    t0, h, ok = jnp.asarray(t0, dtype), jnp.asarray(h, dtype), sol.status == Status.CONVERGED
     init = StepCarry(y0, sol.q, jnp.where(ok, DynStatus.OK, DynStatus.POSITION).astype(jnp.int32), t0, ok)
     run = run_chunks(integ, pj, t0, h, int(steps), init, stroke_bounds(stroke, mech.dof, dtype))
     closable, cond = stop_diagnosis(model, run.carry, h, pj, options)

@@ -234,13 +234,13 @@ def _column(name: str) -> str:
     return re.sub(r"\W+", "_", name).strip("_")
 
 
-def simulation_columns(lk, sim: Simulation, tr, p: Mapping, reactions: bool = True) -> dict:
+def simulation_columns(lk, sim: Simulation, tr, p: Mapping) -> dict:
     """The run as table columns ``NAME[UNIT]`` (SI): `t`; the input with its rate and
     acceleration; every coordinate with its rate and acceleration; the motor's current
     (A); the drive's effort on the input (``effort_<input>``, N m or N: ``n K i``, the
-    constant torque, 0 in free motion); with `reactions` every joint's reaction
-    (``F_<joint>_x``, ``F_<joint>_y``, a slider's ``M_<joint>``: ``Trajectory.dynamics``,
-    frictionless); ``status[-]``: 0 up to the last valid state, the run's ``DynStatus`` after."""
+    constant torque, 0 in free motion); every joint's reaction (``F_<joint>_x``,
+    ``F_<joint>_y``, a slider's ``M_<joint>``: ``Trajectory.dynamics``, joint friction
+    included where the run has it); ``status[-]``: 0 up to the last valid state, the run's ``DynStatus`` after."""
     mech = lk.mechanism
     unit = {n: "m" if n in mech.lengths else "rad" for n in (*mech.inputs, *mech.coords)}
     pf = {k: float(v) for k, v in p.items()}
@@ -267,11 +267,10 @@ def simulation_columns(lk, sim: Simulation, tr, p: Mapping, reactions: bool = Tr
     elif sim.drive == "torque":
         effort = effort + pf["torque"]
     cols[f"effort_{_column(name)}[{'N' if unit[name] == 'm' else 'N m'}]"] = np.where(np.isfinite(u[:, 0]), effort, np.nan)
-    if reactions:
-        for j in lk.model.joints:
-            col, force = _column(joint_name(j)), np.asarray(res.joints[joint_name(j)])
-            cols[f"F_{col}_x[N]"], cols[f"F_{col}_y[N]"] = force.real, force.imag
-            if isinstance(j, Prismatic):
-                cols[f"M_{col}[N m]"] = rows(res.joint_moments[joint_name(j)])
+    for j in lk.model.joints:
+        col, force = _column(joint_name(j)), np.asarray(res.joints[joint_name(j)])
+        cols[f"F_{col}_x[N]"], cols[f"F_{col}_y[N]"] = force.real, force.imag
+        if isinstance(j, Prismatic):
+            cols[f"M_{col}[N m]"] = rows(res.joint_moments[joint_name(j)])
     cols["status[-]"] = np.where(np.all(np.isfinite(u), axis=1), 0, int(tr.status)).astype(np.int64)
     return cols

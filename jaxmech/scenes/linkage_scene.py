@@ -34,7 +34,7 @@ from ..status import Status, status_counts
 from .base import Scene, SceneResult, run_scene
 from .outputs import STATUS, Outputs, merged_status
 
-__all__ = ["linkage_scene", "scene_from_file", "FileScene", "run_file_scene", "point_columns", "PARAMETER_UNITS"]
+__all__ = ["parameter_unit", "linkage_scene", "scene_from_file", "FileScene", "run_file_scene", "point_columns", "PARAMETER_UNITS"]
 
 #: SI unit of a linkage parameter by its prefix.
 PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", "m_": "kg", "J_": "kg m^2",
@@ -46,7 +46,9 @@ PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", 
                    "mu_": "-", "rpin_": "m"}
 
 
-def _unit(name: str, lk: Linkage | None = None) -> str:
+def parameter_unit(name: str, lk: Linkage | None = None) -> str:
+    """The SI unit of the linkage parameter `name` (by its prefix, ``PARAMETER_UNITS``; a
+    viscous friction ``cv_`` by its joint's kind where `lk` is given); "" if none fits."""
     if name == "g":
         return "m/s^2"
     if name.startswith("cv_") and lk is not None and lk.friction is not None:  # viscous friction: by its joint's kind
@@ -177,7 +179,7 @@ def _meaning(name: str, lk: Linkage) -> str:
     """What a linkage parameter is, in the scene's parameter list."""
     if lk.friction is not None and name in lk.friction.parameters:
         return "joint friction"
-    return "drawing" if _unit(name) in ("m", "rad") else "mass property or load"
+    return "drawing" if parameter_unit(name) in ("m", "rad") else "mass property or load"
 
 
 def linkage_scene(lk: Linkage, stroke=None, speed: float = 1.0, summary: str | None = None) -> Scene:
@@ -199,7 +201,7 @@ def linkage_scene(lk: Linkage, stroke=None, speed: float = 1.0, summary: str | N
         if np.all(np.isfinite(np.asarray(sol.q[0]))):
             guess = np.asarray(sol.q[0])
     units = {n: _coordinate_unit(lk, n) for n in mech.coords + mech.inputs}
-    params = {k: (_unit(k, lk), _meaning(k, lk)) for k in lk.params}
+    params = {k: (parameter_unit(k, lk), _meaning(k, lk)) for k in lk.params}
     return Scene(
         name=lk.name, validate=_friction_validation(lk),
         summary=summary or f"linkage {lk.name}: {len(lk.links)} links, driven by {name} from {u0:.6g} to {u1:.6g}",
