@@ -182,6 +182,9 @@ def test_slider_crank_with_friction_everywhere_against_newton_euler():
         np.testing.assert_allclose(np.asarray(res.force_on(link, joint)), want, rtol=0, atol=TOL * np.max(np.abs(want)))
     normal = xs[:, 6]
     np.testing.assert_allclose(np.asarray(res.normal_force("block_B on ground")), normal, rtol=0, atol=TOL * np.max(np.abs(normal)))
+    # the guide's whole force on the block: its friction along +x and its normal force along +y
+    guide = np.array([friction_loads(x, sg)[6] for x, sg in zip(xs, signs)]) + 1j * normal
+    np.testing.assert_allclose(np.asarray(res.force_on("block_B", "block_B on ground")), guide, rtol=0, atol=TOL * np.max(np.abs(guide)))
     # friction changes the torque by far more than the tolerance, with the sign of the crank's speed
     bare = linkage().inverse_dynamics(samples())
     extra = np.asarray(res.tau[:, 0] - bare.tau[:, 0])

@@ -321,7 +321,8 @@ class FrictionReactions(NamedTuple):
 
     - `efforts` ``(dof,)``: the drive efforts' change due to friction (N m or N; add it to
       the frictionless effort); `forces`, `moments`: every joint's reaction with friction
-      (as ``reactions.joint_reactions``).
+      (as ``reactions.joint_reactions``; a guide's or slot's force includes its friction
+      force along it).
     - `friction` ``(k,)``: each joint's friction load on its second body: a pin's moment
       (N m, CCW), a guide's force along its direction (N).
     - `converged`: whether the friction Newton converged (False: NaN results).
@@ -349,4 +350,11 @@ def friction_reactions(model: Model, fr: JointFriction, st: LoadedState, signs, 
     x = jnp.where(conv, x0 + dx, jnp.nan)
     _, forces, moments = unpack_reactions(model, x, geo)
     efforts, _, _ = unpack_reactions(model, jnp.where(conv, dx, jnp.nan), geo)
+    # A guide's or slot's friction is a force of its first body on its second, along it:
+    # part of that joint's force (the reaction system holds it as a load), so that per body
+    # the joints' forces, gravity and the loads balance m a_G.  A pin's is a moment.
+    for k, j in enumerate(joints):
+        if not isinstance(j, Revolute):
+            name = joint_name(j)
+            forces[name] = forces[name] + jnp.where(conv, s[k], jnp.nan) * _direction(model, j, st.q, st.u, st.p)
     return FrictionReactions(efforts, forces, moments, jnp.where(ok, s, jnp.nan), conv)
