@@ -25,7 +25,7 @@ from .linalg import det_small, entries, where
 from .mechanism import Mechanism
 from .structure import blocks, coords_read
 
-__all__ = ["auto_blocks", "branch_names", "has_branch", "branch_value", "off_branch", "on_branch", "flipped_mask"]
+__all__ = ["branch_names", "has_branch", "branch_value", "on_branch", "flipped_mask"]
 
 
 @functools.lru_cache(maxsize=256)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import jax
 
-__all__ = ["default_cache_dir", "enable_compile_cache", "enable_default_cache", "compile_cache_dir", "executables_dir", "switched_off"]
+__all__ = ["enable_compile_cache", "enable_default_cache", "executables_dir", "switched_off"]
 
 _OFF = {"0", "off", "false", "no", ""}
 _ON = {"1", "on", "true", "yes"}

@@ -8,7 +8,7 @@ import argparse
 from . import cli_values as values
 from .cli_values import UsageError
 
-__all__ = ["PROG", "Parser", "parser"]
+__all__ = ["PROG", "parser"]
 
 PROG = "jaxmech"
 PLOTS = ("none", "summary", "all")  # jaxmech run --plots

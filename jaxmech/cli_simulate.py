@@ -16,7 +16,7 @@ from .cli import is_linkage_file, mistakes_of, write_csv
 from .cli_values import UsageError
 from .names import did_you_mean
 
-__all__ = ["simulate_command", "parameter_units", "plot_simulation", "summary"]
+__all__ = ["simulate_command", "parameter_units", "summary"]
 
 def parameter_units(lk, sim) -> dict[str, str]:
     """``{parameter: SI unit}`` of every parameter ``--set`` may change: the linkage's (as

@@ -53,7 +53,7 @@ from .stroke_repair import failed_points, repair
 from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
 from .xla import jit, unfused
 
-__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "straight_then_robust", "repaired_rows", "take_rows", "robust_size",
+__all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "repaired_rows", "take_rows", "robust_size",
            "repair_stroke", "repair_strokes", "all_converged", "predict", "bucket", "checked_step"]
 
 

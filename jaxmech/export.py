@@ -48,7 +48,7 @@ from .cad import APPID, UNIT_SCALE, Sheet, write_dxf, write_svg
 from .drawing import check_point, check_spec, spec_points
 from .units import for_reading, to_si
 
-__all__ = ["Pose", "solve_pose", "export_pose", "write_pose", "export_stroke", "input_value", "link_names", "SUFFIXES", "APPID"]
+__all__ = ["Pose", "solve_pose", "export_pose", "write_pose", "export_stroke", "input_value", "APPID"]
 
 #: The file types written, by suffix.
 SUFFIXES = (".dxf", ".svg")

@@ -36,7 +36,7 @@ from .linalg import solve_blocks, solve_small, where
 from .mechanism import Mechanism
 from .structure import blocks
 
-__all__ = ["implicit_solution", "mechanism_residual", "implicit_positions", "input_derivatives", "implicit_input_derivatives"]
+__all__ = ["implicit_solution", "implicit_positions", "input_derivatives", "implicit_input_derivatives"]
 
 #: Deprecated names -> the names that replaced them (module ``__getattr__`` below).
 DEPRECATED = {"implicit_root": "implicit_positions", "root_derivatives": "input_derivatives", "attach_derivatives": "implicit_input_derivatives"}

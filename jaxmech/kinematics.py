@@ -27,27 +27,9 @@ from . import implicit
 from .options import SolverOptions
 from .xla import jit
 
-__all__ = [
-    "ConstantSpeed",
-    "Ramp",
-    "SmoothStart",
-    "Samples",
-    "drive_rates",
-    "point_kinematics",
-    "check_samples",
-    "Motion",
-    "input_derivatives",
-    "one_state",
-    "time_derivatives",
-    "motion",
-    "drive_samples",
-    "split_drive",
-    "join_drive",
-    "stroke_kinematics",
-    "SampleKinematics",
-    "sample_kinematics",
-    "chain_rule",
-]
+__all__ = ["ConstantSpeed", "Ramp", "SmoothStart", "Samples", "drive_rates", "point_kinematics", "check_samples",
+           "Motion", "input_derivatives", "one_state", "time_derivatives", "motion", "drive_samples", "split_drive",
+           "join_drive", "stroke_kinematics", "sample_kinematics", "chain_rule"]
 
 
 # --------------------------------------------------------------------------- drive laws

@@ -14,7 +14,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["where", "parts", "entries", "UNROLL_MAX", "small_tmatmul", "solve_blocks", "small_max", "small_sum", "small_norm", "solve_small", "inv_small", "cond1", "det_small"]
+__all__ = ["where", "parts", "entries", "small_tmatmul", "solve_blocks", "small_max", "small_norm", "solve_small",
+           "inv_small", "cond1", "det_small"]
 
 def where(c, x, y):
     """``where(c, x, y)`` written with ``lax.select_n``.

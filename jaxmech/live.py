@@ -34,7 +34,7 @@ from .sweep import design_motion
 from .units import for_reading
 from .xla import jit
 
-__all__ = ["LiveView", "live_view", "update", "sliders", "evaluate"]
+__all__ = ["live_view", "update", "sliders", "evaluate"]
 
 @functools.partial(jit, static_argnums=(0, 1))
 def _evaluate(scene: Scene, points: int, p):

@@ -16,7 +16,7 @@ from .options import SolverOptions, tolerances
 from .status import Status
 from .structure import blocks
 
-__all__ = ["newton", "NewtonResult", "NewtonState", "NewtonProblem", "newton_iteration", "newton_status", "damped_solve", "capped_step", "evaluator", "coord_scales", "all_finite", "per_lane"]
+__all__ = ["newton", "NewtonResult", "NewtonState", "newton_iteration", "evaluator", "coord_scales", "per_lane"]
 
 #: Levenberg-Marquardt damping of the kernel (scaled units).  An accepted step divides
 #: ``mu`` by ``MU_DECREASE`` (and drops it to 0, plain Newton, once it is below

@@ -69,7 +69,8 @@ from jax.experimental.serialize_executable import deserialize_and_load, serializ
 
 from .cache import executables_dir
 
-__all__ = ["cached_call", "cached_chain", "cached_json", "calls_lapack", "store_dir", "store_stats", "source_hash", "static_token", "wait_for_stores"]
+__all__ = ["cached_call", "cached_chain", "calls_lapack", "store_dir", "store_stats", "static_token",
+           "wait_for_stores"]
 
 # What ``cached_call`` did, per process: loaded (a stored executable was used), stored (one
 # was written), served (compiled, but JAX's own cache served it, so it is not stored),

@@ -304,3 +304,42 @@ def test_the_loop_carry_rule_sees_what_it_should():
     assert tuple_carries("def f():\n    return jax.lax.scan(g, (a, b, c, d), xs)\n")
     assert not tuple_carries("def f():\n    return jax.lax.while_loop(c, b, (0, x, y))\n")
     assert not tuple_carries("def f():\n    return jax.lax.while_loop(c, b, Carry(0, x, y, z))\n")
+
+
+def _exported(source: str) -> list:
+    """The names of a module's literal ``__all__`` (none without one)."""
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in node.targets):
+            try:
+                return list(ast.literal_eval(node.value))
+            except ValueError:
+                return []
+    return []
+
+
+def unused_exports(modules: dict, readers: list) -> list:
+    """Every name in a module's ``__all__`` (`modules`: ``{where: source}``) that no other
+    module and no reader (tests, benchmarks, examples, docs, notebooks, README) mentions: a
+    name published for no one."""
+    found = []
+    for where, source in modules.items():
+        for name in _exported(source):
+            word = re.compile(rf"\b{re.escape(name)}\b")
+            if not any(word.search(t) for w, t in modules.items() if w != where) and not any(word.search(t) for t in readers):
+                found.append(f"{where}: {name}")
+    return found
+
+
+def test_every_exported_name_is_used_or_documented_outside_its_module():
+    modules = {str(p.relative_to(ROOT)): p.read_text() for p in _modules()}
+    readers = [p.read_text() for d in ("tests", "benchmarks", "examples", "docs", "notebooks") for p in sorted((ROOT / d).rglob("*"))
+               if p.is_file() and p.suffix in (".py", ".md", ".ipynb")]
+    readers += [(ROOT / f).read_text() for f in ("README.md", "ARCHITECTURE.md")]
+    found = unused_exports(modules, readers)
+    assert not found, found
+
+
+def test_the_export_rule_sees_what_it_should():
+    mods = {"a.py": '__all__ = ["used", "lonely"]\ndef used(): ...\ndef lonely(): ...\n', "b.py": "from a import used\n"}
+    assert unused_exports(mods, []) == ["a.py: lonely"]
+    assert unused_exports(mods, ["see `lonely` in the docs"]) == []

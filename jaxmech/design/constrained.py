@@ -41,7 +41,8 @@ import numpy as np
 
 from ..xla import jit
 
-__all__ = ["Stated", "stated_rows", "Program", "ConstrainedResult", "ScaledProblem", "StartPoint", "StartOutcome", "StartsInBox", "starts_in_box", "program", "minimize", "FAIL_VIOLATION"]
+__all__ = ["Stated", "stated_rows", "Program", "ConstrainedResult", "starts_in_box", "program", "minimize",
+           "FAIL_VIOLATION"]
 
 #: Scaled violation reported for every constraint at a design that cannot be assembled.
 FAIL_VIOLATION = 1e3

@@ -51,8 +51,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["CURVES", "PARAMS", "TAU", "PathError", "CrankInterval", "coupler_curve", "cos_transmission_limit", "crank_interval", "crank_intervals",
-           "fully_rotatable", "local_point", "path_error", "read_targets", "transmission_angle"]
+__all__ = ["CURVES", "PARAMS", "TAU", "PathError", "coupler_curve", "cos_transmission_limit", "crank_interval",
+           "crank_intervals", "fully_rotatable", "local_point", "path_error", "read_targets", "transmission_angle"]
 
 PARAMS = ("x0", "y0", "phi", "a", "b", "c", "d", "px", "py")
 CURVES = ("closed", "open", "partial")

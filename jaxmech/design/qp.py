@@ -29,7 +29,7 @@ import jax.numpy as jnp
 
 from ..linalg import solve_small, where
 
-__all__ = ["QPSolution", "solve_qp"]
+__all__ = ["solve_qp"]
 
 
 class QPSolution(NamedTuple):

@@ -36,7 +36,7 @@ from ..xla import jit
 from .sqp import SQPOptions, queue
 from .stroke_problem import StrokeProblem, stroke_evaluator, stroke_sizes
 
-__all__ = ["SecondOrderResult", "Epigraph", "state_evaluator", "epigraph_evaluator", "minimize_second_order", "local_optima"]
+__all__ = ["SecondOrderResult", "state_evaluator", "minimize_second_order"]
 
 
 def state_evaluator(state: Callable, names: tuple):

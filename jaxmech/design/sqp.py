@@ -47,7 +47,7 @@ from ..newton import per_lane
 from .nlp import Evaluation, Status, cholesky_small, kkt_error
 from .qp import solve_qp
 
-__all__ = ["SQPOptions", "SQPState", "SQPLoop", "sqp", "queue", "iteration", "running", "modified_hessian", "merit"]
+__all__ = ["SQPOptions", "sqp", "queue", "iteration", "running", "merit"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,8 +19,8 @@ import numpy as np
 from ..xla import jit
 from .coupler_path import TAU, crank_interval, local_point
 
-__all__ = ["CHUNK", "LMResult", "PairEvaluation", "Pool", "Problem", "basin_hopping", "closest_angles", "evaluate_pairs", "evaluator",
-           "feasible", "levenberg_marquardt", "point_real", "polish", "reassigned", "successive_halving"]
+__all__ = ["CHUNK", "Pool", "Problem", "basin_hopping", "closest_angles", "evaluator", "feasible", "polish",
+           "reassigned", "successive_halving"]
 
 # =========================================================================== least squares
 CHUNK = 1024  #: (start, target) pairs per call of the compiled evaluator: one program for every problem

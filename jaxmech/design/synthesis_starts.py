@@ -12,7 +12,7 @@ import numpy as np
 
 from .coupler_path import TAU, crank_interval, local_point
 
-__all__ = ["placed_starts", "Starts", "GRID", "ARC_TARGETS", "arc_indices"]
+__all__ = ["placed_starts", "Starts", "GRID", "arc_indices"]
 
 
 # =========================================================================== starts (numpy)

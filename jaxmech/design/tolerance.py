@@ -41,7 +41,7 @@ from ..xla import jit
 from .figures import as_batch
 from .sensitivities import batch_jacobian
 
-__all__ = ["ToleranceResult", "Yield", "YieldEstimate", "analyse", "monte_carlo", "wilson_interval", "yield_estimate"]
+__all__ = ["ToleranceResult", "analyse", "monte_carlo", "wilson_interval", "yield_estimate"]
 
 
 def _designs(designs: Mapping, tol: Mapping, what: str):

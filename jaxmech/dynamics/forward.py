@@ -31,9 +31,8 @@ from .model import Model, mechanism_params, prepare_params
 from .status import DynStatus
 from ..xla import jit
 
-__all__ = ["METHODS", "CHUNK", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "Run", "integrate",
-           "integrate_chunk", "StepCarry", "Chunk", "chunk_with_rates", "ChunkedRun", "run_chunks",
-           "stop_diagnosis", "gathered", "forward_dynamics"]
+__all__ = ["METHODS", "CHUNK", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "Run",
+           "integrate", "integrate_chunk", "StepCarry", "Chunk", "gathered", "forward_dynamics"]
 
 
 @jax.tree_util.register_dataclass

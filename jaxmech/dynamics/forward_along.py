@@ -15,7 +15,7 @@ from .friction import friction_parameters
 from .inverse import InverseDynamics, inverse_dynamics_at
 from .model import Model
 
-__all__ = ["BLOCK", "trajectory_dynamics"]
+__all__ = ["trajectory_dynamics"]
 
 #: States per call of the compiled inverse dynamics: a trajectory of any length is cut in
 #: blocks of this size (the last one padded), so a new duration compiles nothing new.

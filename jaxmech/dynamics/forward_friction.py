@@ -39,7 +39,7 @@ from .model import Model, geometry, masses
 from .reactions import reaction_system, solve_reaction_system
 from .virtual_power import balance, loaded_state
 
-__all__ = ["FrictionAccelerations", "friction_accelerations"]
+__all__ = ["friction_accelerations"]
 
 
 class FrictionAccelerations(NamedTuple):

@@ -27,9 +27,8 @@ from .model import Model
 from .status import DynStatus
 from .virtual_power import generalized_forces, mass_matrix
 
-__all__ = ["METHODS", "Integrator", "newton_tolerance", "rhs", "coordinate_rates", "stage_residual", "Run", "StepCarry", "Chunk", "StageSolve",
-           "StepContext", "stage_newton", "step_status", "advance", "integration_step", "step_context", "integrate_chunk",
-           "integrate"]
+__all__ = ["METHODS", "Integrator", "newton_tolerance", "rhs", "coordinate_rates", "stage_residual", "Run",
+           "StepCarry", "Chunk", "integrate_chunk", "integrate"]
 
 
 def tableau(name):

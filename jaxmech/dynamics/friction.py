@@ -58,9 +58,9 @@ from .model import Model, geometry, point_of
 from .reactions import joint_axes, reaction_system, solve_reaction_system, unpack_reactions
 from .virtual_power import LoadedState
 
-__all__ = ["FrictionJoint", "JointFriction", "FrictionReactions", "joint_speeds", "friction_signs", "speed_scale", "stroke_signs", "friction_speeds",
-           "friction_reactions", "friction_status", "friction_parameters", "friction_joints", "friction_norms", "friction_terms", "unit_friction_solutions",
-           "solve_friction_loads", "NEWTON_STEPS"]
+__all__ = ["FrictionJoint", "JointFriction", "joint_speeds", "friction_signs", "stroke_signs", "friction_speeds",
+           "friction_reactions", "friction_status", "friction_parameters", "friction_joints", "friction_norms",
+           "friction_terms", "unit_friction_solutions", "solve_friction_loads"]
 
 #: Newton steps allowed per sample (a converged sample takes 2 to 5).
 NEWTON_STEPS = 40

@@ -30,8 +30,8 @@ from .model import Model, mechanism_params, prepare_params
 from .reactions import joint_axes, joint_reactions
 from .virtual_power import balance, loaded_state
 
-__all__ = ["InverseDynamics", "JointBodies", "Holding", "holding", "inverse_dynamics", "inverse_dynamics_at", "inverse_dynamics_batch",
-           "statics"]
+__all__ = ["InverseDynamics", "Holding", "holding", "inverse_dynamics", "inverse_dynamics_at",
+           "inverse_dynamics_batch", "statics"]
 
 
 class JointBodies(NamedTuple):

@@ -30,7 +30,7 @@ from .status import DynStatus
 from .virtual_power import generalized_forces
 from ..xla import jit
 
-__all__ = ["Equilibrium", "equilibrium", "static_residual"]
+__all__ = ["Equilibrium", "equilibrium"]
 
 
 @jax.tree_util.register_dataclass

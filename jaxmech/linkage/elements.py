@@ -42,8 +42,8 @@ from ..names import did_you_mean, near_hint
 from .terms import angle_value
 from .values import read_names, read_number
 
-__all__ = ["ARGUMENTS", "Element", "Elements", "GasSpring", "LinearDamper", "STORING", "DISSIPATING", "read_elements",
-           "element_parameters", "element_loads", "load_name", "drawing_values"]
+__all__ = ["ARGUMENTS", "Element", "STORING", "DISSIPATING", "read_elements", "element_parameters", "element_loads",
+           "load_name", "drawing_values"]
 
 GROUND = "ground"
 

@@ -22,7 +22,7 @@ from .elements import ARGUMENTS
 from .spec import Linkage
 from .stroke_file import STROKE_KEYS
 
-__all__ = ["read_linkage_file", "read_linkage_tables", "load_linkage", "LINKAGE_KEYS", "TABLES"]
+__all__ = ["read_linkage_file", "read_linkage_tables", "load_linkage", "TABLES"]
 
 LINKAGE_KEYS = ("name", "points", "links", "ground", "driver", "sliders", "slots", "actuators", "mass", "inertia",
                 "centre", "gravity", "forces", "moments", *ARGUMENTS, "friction")

@@ -15,7 +15,7 @@ from ..dynamics.forward import Trajectory, forward_dynamics
 from ..dynamics.joints import joint_name
 from .friction import friction_key
 
-__all__ = ["actuator_parameters", "linkage_forward_dynamics"]
+__all__ = ["linkage_forward_dynamics"]
 
 
 def actuator_parameters(motor, voltage, actuators) -> tuple[str, ...]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["mass_shape", "shape_properties", "link_mass_properties", "derived_shapes"]
+__all__ = ["shape_properties", "link_mass_properties", "derived_shapes"]
 
 
 def _hull(names, z: np.ndarray) -> list:

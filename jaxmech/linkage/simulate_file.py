@@ -43,8 +43,7 @@ from ..units import split_quantity
 from .friction import friction_key
 from .values import read_number
 
-__all__ = ["SIMULATE_KEYS", "MOTOR_KEYS", "ConstantEffort", "Simulation", "read_simulate", "run_simulation",
-           "simulation_columns", "friction_joints"]
+__all__ = ["read_simulate", "run_simulation", "simulation_columns", "friction_joints"]
 
 SIMULATE_KEYS = ("duration", "step", "u0", "u_dot0", "friction_speed", "torque", "motor")
 #: ``[simulate.motor]``'s keys and their SI units (``current0`` is a state, not a parameter).

@@ -25,7 +25,7 @@ from ..kinematics import Samples
 from ..names import near_hint
 from ..units import to_si
 
-__all__ = ["FileStroke", "STROKE_KEYS", "LAWS", "read_stroke", "rock_samples", "stroke_samples"]
+__all__ = ["FileStroke", "STROKE_KEYS", "read_stroke", "stroke_samples"]
 
 STROKE_KEYS = ("from", "to", "speed", "summary", "law", "cycles", "period", "samples")
 LAWS = ("sweep", "rock")

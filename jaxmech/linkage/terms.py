@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from ..mechanism import cis
 
-__all__ = ["Term", "value", "show", "negate", "angle_value", "show_angle"]
+__all__ = ["Term", "value", "show", "negate", "angle_value"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,7 +14,7 @@ import re
 
 from ..units import split_quantity, to_si
 
-__all__ = ["COMPOUND", "read_names", "read_number", "read_point", "wrap_angle"]
+__all__ = ["read_names", "read_number", "read_point", "wrap_angle"]
 
 #: The compound units read word by word: stiffnesses and dampings.
 COMPOUND = ("N/m", "N m/rad", "N s/m", "N m s/rad")

@@ -9,7 +9,7 @@ from ..mechanism import Mechanism, cis
 from .base import Scene
 from .outputs import Outputs
 
-__all__ = ["FOURBAR", "SLIDER_CRANK", "FOURBAR_PARAMETERS", "SLIDER_CRANK_PARAMETERS", "fourbar_mechanism", "slider_crank_mechanism"]
+__all__ = ["FOURBAR", "SLIDER_CRANK", "fourbar_mechanism", "slider_crank_mechanism"]
 
 #: Four-bar: crank a at O2 (angle theta2), coupler b (theta3), rocker c at O4 (theta4),
 #: ground d along +x.  Loop: a e^{i theta2} + b e^{i theta3} - c e^{i theta4} - d = 0.

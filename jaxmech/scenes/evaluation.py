@@ -35,7 +35,8 @@ from ..xla import jit
 from .outputs import merged_status, run_outputs, sample_status
 from .outputs import output_units as scene_output_units
 
-__all__ = ["SCENE_OPTIONS", "stroke_drive", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "scene_outputs", "scene_outputs_status", "stroke_stage", "repair_stage", "scene_repair", "repaired_part", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
+__all__ = ["SCENE_OPTIONS", "scene_motion", "StrokePart", "scene_stroke", "scene_kinematics", "stroke_stage",
+           "repair_stage", "repaired_part", "outputs_stage", "motion_and_outputs", "output_units", "evaluate"]
 
 #: Solver options of a scene's stroke wherever it is evaluated (``run_scene``, sweeps,
 #: design, the live view) unless the caller gives its own: 256 anchors.

@@ -66,32 +66,10 @@ from .base import Scene
 from .outputs import Outputs
 from ..xla import jit
 
-__all__ = [
-    "SCENE",
-    "OUTPUT_UNITS",
-    "FT",
-    "SPEED",
-    "mechanism",
-    "gear_by_angle",
-    "design_mechanism",
-    "family_mechanism",
-    "design",
-    "design_family",
-    "DEFAULTS",
-    "PARAMETERS",
-    "gear_angle",
-    "constant_speed_motion",
-    "linear_angle_motion",
-    "retraction_time",
-    "transmission_angle",
-    "moment_arm",
-    "REPORT",
-    "report_printed_system",
-    "report_eq5",
-    "report_eq6",
-    "report_listing",
-    "report_plotted_omega_angle",
-]
+__all__ = ["SCENE", "OUTPUT_UNITS", "FT", "SPEED", "mechanism", "design", "design_family", "DEFAULTS", "PARAMETERS",
+           "gear_angle", "constant_speed_motion", "linear_angle_motion", "retraction_time", "transmission_angle",
+           "moment_arm", "REPORT", "report_printed_system", "report_eq5", "report_eq6", "report_listing",
+           "report_plotted_omega_angle"]
 
 FT = 0.3048  #: m per ft (exact)
 X1, X2 = 1.25 * FT, 2.0 * FT  #: cylinder length gear down / gear up (m): 1.25 ft, 2 ft

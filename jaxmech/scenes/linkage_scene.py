@@ -34,7 +34,7 @@ from ..status import Status, status_counts
 from .base import Scene, SceneResult, run_scene
 from .outputs import STATUS, Outputs, merged_status
 
-__all__ = ["parameter_unit", "linkage_scene", "scene_from_file", "FileScene", "run_file_scene", "point_columns", "PARAMETER_UNITS"]
+__all__ = ["parameter_unit", "linkage_scene", "scene_from_file", "run_file_scene", "point_columns"]
 
 #: SI unit of a linkage parameter by its prefix.
 PARAMETER_UNITS = {"len_": "m", "x_": "m", "y_": "m", "R_": "m", "ang_": "rad", "m_": "kg", "J_": "kg m^2",

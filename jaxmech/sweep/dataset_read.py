@@ -17,7 +17,7 @@ from .dataset import (FORMAT, FORMAT_1, LOST_FILE, MANIFEST, PART_FILE, PART_FIL
                       Dataset, DatasetState, DatasetWriter, write_manifest)
 from .kernel import ChunkData
 
-__all__ = ["read_dataset", "convert_dataset", "read_manifest"]
+__all__ = ["read_dataset", "convert_dataset"]
 
 
 def read_manifest(root: Path) -> dict | None:

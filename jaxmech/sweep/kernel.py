@@ -29,7 +29,8 @@ from ..scenes.outputs import output_units, run_outputs
 from ..xla import jit
 from .evaluate import Figures, figure_names, stroke_figures
 
-__all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "in_scene_order", "outputs_mode", "compiled_kernel", "default_budget", "lost_chunk", "plan_chunk", "run_chunk", "round_up"]
+__all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "outputs_mode", "default_budget", "lost_chunk",
+           "plan_chunk", "run_chunk"]
 
 
 @dataclasses.dataclass(frozen=True)
