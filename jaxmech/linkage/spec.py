@@ -47,7 +47,8 @@ class Linkage:
       revolute joint, a point of one link only is a tracer on it.
     - `ground`: the points fixed to the frame (ground pivots, guides' and slots' anchors).
     - `driver`: what is driven, one name per degree of freedom: a link turning about its
-      ground pivot (input ``theta_<link>``, its angle in rad), a slider block (``s_<block>``,
+      ground pivot (input ``theta_<link>``, its angle in rad from its first listed point
+      to its second, as every link's), a slider block (``s_<block>``,
       its travel from the drawing in m), an actuator (its name: its length in m).
     - `sliders`: ``{block: {"on": guide, "angle": direction}}``: the link `block` (or, given
       a point name, a massless block at that point) slides along a straight guide fixed to

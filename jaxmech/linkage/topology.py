@@ -5,8 +5,11 @@ Bodies are the graph's nodes (ground, the links, the slider blocks, the actuator
 its edges (a pin at a point that several bodies list, a slider's guide, a pin in a slot).
 A breadth-first spanning tree from ground reaches every body through one joint, its
 *entry*: every point of a body is then the entry's position plus one link vector,
-``len_E_P e^{i (theta_body + ang_D_E_P)}`` (E the entry, D the body's first other point,
-which sets the body's angle).  Each joint outside the tree closes one loop: its position
+``len_E_P e^{i (theta_body + ang_D_E_P)}`` (E the entry, D the body's first other point).
+``theta_body`` is the direction from the body's first listed point to its second, as
+drawn, whatever its entry: where the entry is not the first point the vector carries a
+minus sign and, entered through a third point, the plate's angle at its first point
+(``_Builder.frame``).  Each joint outside the tree closes one loop: its position
 reached from one side minus from the other is zero, ``E - N + 1`` complex loops (Euler), the
 fewest equations the linkage can be written with, with the paths' common part cancelled.
 
@@ -22,6 +25,8 @@ import dataclasses
 import functools
 import hashlib
 from collections import deque
+
+import jax.numpy as jnp
 
 from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
 from ..dynamics.model import Body, Gravity, Model, Moment, PointForce
@@ -87,9 +92,9 @@ class Built:
       (``("x"|"y", point)``, ``("len", entry, point)``, ``("ang", direction, entry, point)``,
       ``("frame", body, entry, point)``, ``("guide"|"slot", name, body)``, ``("radius", pin,
       centre)``); `coords`, `inputs`: ``{name: recipe}`` at the drawing.
-    - `frames`: per body, the two points its angle is measured between, as drawn (the link's
-      first listed point to its second where the tree enters it through the second; else
-      ``(entry, direction)``; direction None for a block).
+    - `frames`: per body, the two points its angle is measured between, as drawn: a link's
+      (an actuator's) first listed point and its second, whatever point the tree enters it
+      through; a block's ``(entry, None)`` (its angle is its guide's).
     - `virtual`: ``{virtual point: (body, what)}``: centres of mass, guide and slot bases.
     - `joints`: per moving link, the points that join it to another body (mass defaults).
     """
@@ -120,6 +125,7 @@ class _Builder:
         owned = {GROUND: tuple(top.ground), **self.links, **self.acts}
         self.members = {x: [b for b in self.bodies if x in owned[b]] for x in top.points}
         self.recipes: dict = {}
+        self.derived: dict = {}  # {angle: (len_E_P1, len_E_P2, ang_P1_E_P2)}: a plate's angle at P1 (``frame``)
         self.virtual: dict = {}
         self._check()
         self.edges = self._edges()
@@ -208,20 +214,41 @@ class _Builder:
         centre = self.slots[e.point][1]
         return centre if centre else self._virtual(f"{e.point}_on_{body}", body, ("at", e.point))
 
+    def listed(self, body: str) -> tuple:
+        """A link's or an actuator's points in the order the drawing lists them."""
+        return self.acts.get(body) or self.links.get(body, ())
+
     @functools.lru_cache(maxsize=None)  # noqa: B019
-    def flipped(self, body: str) -> bool:
-        """Whether the tree enters a link through its second listed point: its angle is then
-        measured, as drawn, from its first listed point to that one (the entry's frame,
-        entry to first point, is half a turn from it: its link vectors carry a minus sign).
-        A driver keeps its angle about its ground pivot."""
-        pts = self.links.get(body, ())
-        return body not in self.blocks and body not in self.top.drivers and len(pts) >= 2 and self.entry(body) == pts[1]
+    def entered_elsewhere(self, body: str) -> bool:
+        """Whether the tree enters a link (or an actuator) elsewhere than at its first listed
+        point: its angle ``theta_<body>`` is still measured as drawn, from its first listed
+        point ``P1`` to its second ``P2``; the link vectors from its entry ``E`` then carry a
+        minus sign (``X - E = -len_E_X e^{i (theta + ang_P2_P1_E + ang_P1_E_X)}``, the angle
+        ``ang_P2_P1_E`` at ``P1`` from ``P2`` to ``E`` being none where ``E`` is ``P2``)."""
+        pts = self.listed(body)
+        return body not in self.blocks and len(pts) >= 2 and self.entry(body) != pts[0]
+
+    @functools.lru_cache(maxsize=None)  # noqa: B019
+    def frame(self, body: str) -> tuple:
+        """The angle of the direction from a body's entry to its ``direction`` point: the
+        body's angle, plus where the entry is neither its first nor its second listed point
+        the plate's angle ``ang_P2_P1_E`` at its first point ``P1`` from ``P2`` to the
+        entry ``E``, less half a turn (carried by the minus sign of ``entered_elsewhere``).  That
+        angle is derived from the plate's own parameters (``derived``), not one more."""
+        pts, e = self.listed(body), self.entry(body)
+        if not self.entered_elsewhere(body) or e == pts[1] or body in self.acts:
+            return self.theta(body)
+        p1, p2 = pts[0], pts[1]
+        name = f"ang_{p2}_{p1}_{e}"
+        la, lb, a = f"len_{e}_{p1}", f"len_{e}_{p2}", f"ang_{p1}_{e}_{p2}"
+        self.recipes[la], self.recipes[lb], self.recipes[a] = ("len", e, p1), ("len", e, p2), ("ang", p1, e, p2)
+        self.derived[name] = (la, lb, a)
+        return self.theta(body) + ((1, name),)
 
     def direction(self, body: str):
         if body in self.blocks:
             return None
-        pts = self.acts.get(body) or self.links[body]
-        others = [x for x in pts if x != self.entry(body)]
+        others = [x for x in self.listed(body) if x != self.entry(body)]
         return others[0]
 
     def _virtual(self, name, body, what):
@@ -266,17 +293,17 @@ class _Builder:
         base = self.entry_terms(body)
         if x == entry:
             return base
+        sign = -1 if self.entered_elsewhere(body) else 1
         if body in self.acts:
-            return base + (Term(1, body, self.theta(body)),)
+            return base + (Term(sign, body, self.theta(body)),)
         length = f"len_{entry}_{x}"
         self.recipes[length] = ("len", entry, x)
         d = self.direction(body)
-        sign = -1 if self.flipped(body) else 1
         if d == x:
-            return base + (Term(sign, length, self.theta(body)),)
+            return base + (Term(sign, length, self.frame(body)),)
         ang = f"ang_{d}_{entry}_{x}" if d is not None else f"ang_{body}_{entry}_{x}"
         self.recipes[ang] = ("ang", d, entry, x) if d is not None else ("frame", body, entry, x)
-        return base + (Term(sign, length, self.theta(body) + ((1, ang),)),)
+        return base + (Term(sign, length, self.frame(body) + ((1, ang),)),)
 
     def closing(self, e: _Edge) -> tuple:
         if e.kind == "revolute":
@@ -321,11 +348,24 @@ def _coordinates(b: _Builder) -> tuple[list, list]:
     return coords, inputs
 
 
-def _lookup(coords, inputs):
-    cset, iset = frozenset(coords), frozenset(inputs)
+def _lookup(coords, inputs, derived=None):
+    """``values(q, u, p)``: a name -> value lookup over coordinates, inputs, parameters and
+    the plates' derived angles (``_Builder.frame``: the angle at ``P1`` from ``P2`` to the
+    entry ``E`` of the triangle ``len_E_P1``, ``len_E_P2``, ``ang_P1_E_P2``)."""
+    cset, iset, derived = frozenset(coords), frozenset(inputs), derived if derived is not None else {}
 
     def values(q, u, p):
-        return lambda n: q[n] if n in cset else (u[n] if n in iset else p[n])
+        def look(n):
+            if n in cset:
+                return q[n]
+            if n in iset:
+                return u[n]
+            if n in derived:
+                la, lb, a = (look(k) for k in derived[n])
+                return jnp.arctan2(lb * jnp.sin(a), la - lb * jnp.cos(a))
+            return p[n]
+
+        return look
 
     return values
 
@@ -341,7 +381,7 @@ def _depth(b: _Builder, body: str) -> int:
 
 def _mechanism(b: _Builder, loops, coords, inputs) -> Mechanism:
     top = b.top
-    values = _lookup(coords, inputs)
+    values = _lookup(coords, inputs, b.derived)
     point_terms = {}
     for x in top.points:
         home = min(b.members[x], key=lambda body: _depth(b, body))
@@ -392,7 +432,7 @@ def _inertia(b: _Builder, mech: Mechanism, link: str):
         return f"J_{link}"
     kind, corners = shapes[link][0], shapes[link][1]
     ring = tuple(b.pos(link, x) for x in corners)
-    values = _lookup(mech.coords, mech.inputs)
+    values = _lookup(mech.coords, mech.inputs, b.derived)
     rest = dict.fromkeys(mech.coords + mech.inputs, 0.0)
 
     def inertia(p):
@@ -404,7 +444,7 @@ def _inertia(b: _Builder, mech: Mechanism, link: str):
 
 def _model(b: _Builder, mech: Mechanism, names: dict) -> Model:
     top = b.top
-    values = _lookup(mech.coords, mech.inputs)
+    values = _lookup(mech.coords, mech.inputs, b.derived)
 
     def angle_spec(body):
         th = b.theta(body)
@@ -480,9 +520,9 @@ def build(top: Topology) -> Built:
             f"left {'(add a driver or a joint)' if free > 0 else '(it is over-constrained: remove a link or a driver)'}")
     mech = _mechanism(b, loops, coords, inputs)
     model = _model(b, mech, names)
-    # a body's angle is measured from the first point of its frame to the second
-    frames = {body: (b.direction(body), b.entry(body)) if b.flipped(body) else (b.entry(body), b.direction(body))
-              for body in b.bodies if body != GROUND}
+    # a body's angle is measured from the first point of its frame to the second: a link's
+    # (an actuator's) first listed point to its second; a block's entry (its angle the guide's)
+    frames = {body: (b.entry(body), None) if body in b.blocks else tuple(b.listed(body)[:2]) for body in b.bodies if body != GROUND}
     coord_recipes = {b.motion_of(body): ("travel",) if body in b.blocks else ("angle", body) for body in list(b.links) + list(b.acts)}
     coord_recipes.update({act: ("length", *pts) for act, pts in b.acts.items()})
     for pin, (_, centre) in b.slots.items():
