@@ -2,7 +2,7 @@
 
 ```
 jaxmech scenes [SCENE]
-jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR] [--plots all|summary|none]
+jaxmech run SCENE [--set NAME=VALUE ...] [--points N] [--out DIR] [--plots all|summary|none] [--plot COLUMN ...] [--transmission A,J,B ...] [--ma-output NAME]
 jaxmech animate SCENE [--set NAME=VALUE ...] [--frames N] [--out FILE.gif|FILE.mp4|FILE.html]
 jaxmech export SCENE [--at VALUE] --out FILE.dxf|FILE.svg [--set NAME=VALUE ...] [--stroke [--points N]] [--units m|mm]
 jaxmech sweep SCENE --grid NAME=START:STOP:N [--grid ...] [--points N] [--out FILE.csv] [--chunk-size K]
@@ -117,7 +117,7 @@ def write_csv(table: dict, path: Path) -> None:
             w.writerow([int(v) if np.issubdtype(np.asarray(v).dtype, np.integer) else repr(float(v)) for v in row])
 
 
-def _write_run(result, outdir: Path, plots: str = "all", point_kinematics: bool = False) -> list[Path]:
+def _write_run(result, outdir: Path, plots: str = "all", point_kinematics: bool = False, choice: dict | None = None) -> list[Path]:
     """CSV and the plots (``--plots``: ``all``, ``summary``, ``none``) of one run into
     ``outdir``; returns the paths written.  `point_kinematics`: every named point's
     position, velocity and acceleration in the CSV too, before its status column."""
@@ -136,15 +136,51 @@ def _write_run(result, outdir: Path, plots: str = "all", point_kinematics: bool 
         return [csv_path]
     if result.scene.plots is not None:  # a scene's own plots: all of them, or none
         return [csv_path, *(Path(x) for x in result.scene.plots(result, outdir))]
-    return [csv_path, *(_summary_plots(result, outdir) if plots == "summary" else save_default_plots(result, outdir))]
+    if plots == "summary":
+        return [csv_path, *_summary_plots(result, outdir, columns=(choice or {}).get("columns"))]
+    return [csv_path, *save_default_plots(result, outdir, **(choice or {}))]
 
 
-def _summary_plots(result, outdir: Path, dpi: int = 110) -> list[Path]:
+def _plot_choice(args, result) -> dict:
+    """``--plot``, ``--transmission``, ``--ma-output`` as ``save_default_plots``' options,
+    every name checked against the run (``UsageError`` with a "did you mean")."""
+    from .plot import plot_columns
+
+    out = {}
+    columns = [c.strip() for arg in args.plot_columns for c in arg.split(",") if c.strip()]
+    if columns:
+        known = plot_columns(result)
+        for c in columns:
+            if c.partition("[")[0] not in known:
+                raise UsageError(f"--plot {c!r} is not a column of {result.scene.name}; {did_you_mean(c, known, 'its columns are')}")
+        out["columns"] = [c.partition("[")[0] for c in columns]
+    points = list(result.scene.mechanism.points)
+    triples = []
+    for arg in args.transmission:
+        names = [x.strip() for x in arg.replace("-", ",").split(",")]
+        if len(names) != 3:
+            raise UsageError(f"--transmission {arg!r}: give three points A,J,B (the angle at J between J->A and J->B)")
+        for x in names:
+            if x not in points:
+                raise UsageError(f"--transmission {arg!r}: {x!r} is not a point of {result.scene.name}; {did_you_mean(x, points, 'its points are')}")
+        triples.append(tuple(names))
+    if triples:
+        out["transmission"] = triples
+    if args.ma_output is not None:
+        known = list(result.scene.mechanism.coords) + points
+        if args.ma_output not in known:
+            raise UsageError(f"--ma-output {args.ma_output!r} is not a coordinate or point of {result.scene.name}; "
+                             f"{did_you_mean(args.ma_output, known, 'its coordinates and points are')}")
+        out["output"] = args.ma_output
+    return out
+
+
+def _summary_plots(result, outdir: Path, dpi: int = 110, columns=None) -> list[Path]:
     """Two of the default plots (``save_default_plots``' files): the poses, and the outputs
-    (the coordinates when the scene has none)."""
+    (`columns` of them: ``--plot``; the coordinates when the scene has none)."""
     from .plot import plot_coordinates, plot_outputs, plot_poses
 
-    figs = {"outputs": plot_outputs} if result.outputs else {"coordinates": plot_coordinates}
+    figs = {"outputs": lambda r: plot_outputs(r, names=columns)} if result.outputs or columns else {"coordinates": plot_coordinates}
     paths = []
     for key, plot in {**figs, "poses": plot_poses}.items():
         path = outdir / f"{result.scene.name}_{key}.png"
@@ -174,7 +210,7 @@ def _cmd_scenes(args) -> int:
 def _cmd_run(args) -> int:
     scene = _scene(args.scene)
     result = _run(args.scene, scene, args.points, args.overrides)
-    paths = _write_run(result, Path(args.out), args.plots, args.point_kinematics)
+    paths = _write_run(result, Path(args.out), args.plots, args.point_kinematics, _plot_choice(args, result))
     print(result.summary())
     for path in paths:
         print(f"wrote {path}")

@@ -68,6 +68,15 @@ def _add_run(sub) -> None:
                    help="the PNG plots to write: all (default: coordinates, velocities, accelerations, outputs, transmission, "
                    "poses), summary (the poses, and the outputs or else the coordinates), none (the CSV and the summary only; "
                    "plots take seconds of CPU)")
+    r.add_argument("--plot", dest="plot_columns", action="append", metavar="COLUMN[,COLUMN...]", default=[],
+                   help="a CSV column to plot in the outputs figure, named without its unit (effort_theta_crank, F_B_x, "
+                   "theta_rocker); repeatable or comma-separated (default: every output)")
+    r.add_argument("--transmission", action="append", metavar="A,J,B", default=[],
+                   help="a transmission angle to plot: the angle at joint J between J->A and J->B (repeatable: one curve each, "
+                   "as for a linkage of several loops or with a slider; default the scene's own, none for a linkage file)")
+    r.add_argument("--ma-output", metavar="NAME", default=None,
+                   help="the coordinate (or point) whose mechanical advantage the transmission figure draws (default the "
+                   "scene's output, else its last coordinate)")
     r.add_argument("--point-kinematics", action="store_true",
                    help="add every named point's position, velocity and acceleration to the CSV: x_P[m], y_P[m], vx_P[m/s], "
                    "vy_P[m/s], ax_P[m/s^2], ay_P[m/s^2] (joints, traced points, centres of mass G_<link>)")

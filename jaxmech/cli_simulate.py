@@ -72,13 +72,13 @@ def summary(lk, sim, tr, cols: dict) -> str:
 
 def plot_simulation(lk, cols: dict, path: Path, dpi: int = 110) -> Path:
     """The input's position and rate (and the motor's current) against time, one PNG."""
-    from .drawing import new_figure
+    from .drawing import label_columns, screen_figure
     from .units import for_reading
 
     name = lk.mechanism.inputs[0]
     keys = [k for k in cols if k.startswith(f"{name}[") or k.startswith(f"{name}_dot[")]
     keys += ["current[A]"] if "current[A]" in cols else []
-    fig, axes = new_figure(len(keys), 1)
+    fig, axes = screen_figure(len(keys))
     for ax, key in zip(axes, keys):
         unit = key[key.index("[") + 1:-1]
         values, shown = for_reading(cols[key], unit)
@@ -86,7 +86,7 @@ def plot_simulation(lk, cols: dict, path: Path, dpi: int = 110) -> Path:
         ax.set_ylabel(f"{key[:key.index('[')]} [{shown}]")
         ax.grid(True, alpha=0.3)
     axes[0].set_title(f"{lk.name}: forward dynamics")
-    axes[-1].set_xlabel("t [s]")
+    label_columns(axes, "t [s]")
     fig.savefig(path, dpi=dpi)
     return path
 

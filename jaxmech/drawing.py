@@ -75,6 +75,37 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, width: float = 6.4, height: fl
     return fig, list(axes.ravel())
 
 
+SCREEN = (1600, 1000)  # px: every PNG the command line writes fits a 1920x1080 screen at its dpi
+SAVE_DPI = 110  # the command line's PNG resolution
+
+
+def screen_figure(n: int, *, width: float = 6.4, height: float = 2.6, min_height: float = 1.8, dpi: int = SAVE_DPI):
+    """A ``new_figure`` of `n` panels sized for a screen: one column of `width` x `height`
+    in panels while it fits ``SCREEN`` at `dpi`, else a grid (row by row) that grows within
+    that box, each panel at least `min_height` in tall while it can be; fonts keep their
+    size in points.  Panels of a column share x; the lowest one of each column shows its
+    tick labels.  Returns ``(fig, axes)``, `n` axes (the grid's spare cells removed)."""
+    box_w, box_h = SCREEN[0] / dpi, SCREEN[1] / dpi
+    rows = max(1, min(n, int(box_h // height)))
+    if n > rows:
+        rows = max(1, int(box_h // min_height))
+    cols = -(-n // rows)
+    rows = -(-n // cols)
+    fig, axes = new_figure(rows, cols, width=min(width, box_w / cols), height=min(height, box_h / rows))
+    for ax in axes[n:]:
+        fig.delaxes(ax)
+    for k in range(max(0, n - cols), n):  # the lowest panel of each column
+        axes[k].xaxis.set_tick_params(labelbottom=True)
+    return fig, axes[:n]
+
+
+def label_columns(axes, label: str) -> None:
+    """`label` under the lowest panel of each column of a ``screen_figure``."""
+    cols = axes[0].get_gridspec().ncols if axes else 1
+    for ax in axes[max(0, len(axes) - cols):]:
+        ax.set_xlabel(label)
+
+
 
 # --------------------------------------------------------------------------- drawing spec and positions
 def drawing_spec(result) -> dict:
@@ -368,7 +399,7 @@ def plot_poses(result, indices: Sequence[int] | None = None, *, spec: Mapping | 
     """
     n = result.motion.q.shape[0]
     indices = [0, n // 2, n - 1] if indices is None else [_index(result, i) for i in indices]
-    fig, axes = new_figure(1, len(indices), width=4.2, height=4.0, sharex=False)
+    fig, axes = new_figure(1, len(indices), width=min(4.2, SCREEN[0] / SAVE_DPI / len(indices)), height=4.0, sharex=False)
     for ax, i in zip(axes, indices):
         draw_mechanism(result, i, ax=ax, spec=spec, trace=trace)
     fig.suptitle(f"{result.scene.name}")

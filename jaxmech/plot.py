@@ -32,7 +32,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .drawing import animate as animate
-from .drawing import new_figure, point_positions
+from .drawing import label_columns, point_positions, screen_figure
 from .drawing import draw_mechanism as draw_mechanism
 from .drawing import drawing_spec as drawing_spec
 from .drawing import plot_poses as plot_poses
@@ -109,7 +109,7 @@ def plot_coordinates(result, *, order: int = 0, against: str = "input", names: S
     data = (mo.q, mo.q_dot, mo.q_ddot)[order]
     x, xlabel = _abscissa(result, against)
     units = list(dict.fromkeys(result.scene.units[n] for n in names))
-    fig, axes = new_figure(len(units))
+    fig, axes = screen_figure(len(units))
     for ax, unit in zip(axes, units):
         for n in names:
             if result.scene.units[n] == unit:
@@ -119,7 +119,7 @@ def plot_coordinates(result, *, order: int = 0, against: str = "input", names: S
         ax.set_ylabel(f"{_QUANTITY[order]} [{_per(unit, order)}]")
         ax.legend(loc="best", fontsize="small")
         ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel(xlabel)
+    label_columns(axes, xlabel)
     fig.suptitle(f"{result.scene.name}: {_QUANTITY[order]}s")
     return fig
 
@@ -135,7 +135,10 @@ def plot_accelerations(result, *, against: str = "input", names: Sequence[str] |
 
 
 def plot_outputs(result, *, names: Sequence[str] | None = None, against: str = "input") -> Figure:
-    """The scene's outputs (torque, force, voltage...), one axes each, y label ``NAME [UNIT]``.
+    """The scene's outputs (torque, force, voltage...), one axes each, y label ``NAME [UNIT]``,
+    on a screen-sized grid (``screen_figure``).  `names`: the columns to plot (default: every
+    output): outputs, or any other column of ``result.table()`` (a coordinate, its rates),
+    named without the unit.
 
     **Raises** ``ValueError`` if the scene has no outputs or a name is unknown.
     """
@@ -143,19 +146,31 @@ def plot_outputs(result, *, names: Sequence[str] | None = None, against: str = "
     names = list(outs if names is None else names)
     if not names:
         raise ValueError(f"scene {result.scene.name!r} has no outputs to plot")
+    columns = plot_columns(result)
     for n in names:
-        if n not in outs:
+        if n not in outs and n not in columns:
             raise ValueError(f"unknown output {n!r}; outputs: {list(outs)}")
     x, xlabel = _abscissa(result, against)
-    fig, axes = new_figure(len(names))
+    fig, axes = screen_figure(len(names))
     for ax, n in zip(axes, names):
-        values, unit = for_reading(np.asarray(outs[n][0], float), outs[n][1])
+        values, unit = for_reading(*(outs[n] if n in outs else columns[n]))
+        values = np.asarray(values, float)
         ax.plot(x, values if values.ndim else np.full_like(x, values), label=n)
         ax.set_ylabel(f"{n} [{unit}]")
         ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel(xlabel)
+    label_columns(axes, xlabel)
     fig.suptitle(f"{result.scene.name}: outputs")
     return fig
+
+
+def plot_columns(result) -> dict:
+    """``{name: (values, unit)}``: the columns of ``result.table()`` (its CSV) by name
+    without the unit, the names ``--plot`` takes."""
+    out = {}
+    for key, values in result.table().items():
+        name, _, unit = key.partition("[")
+        out[name] = (np.asarray(values, float), unit.rstrip("]") or "-")
+    return out
 
 
 # --------------------------------------------------------------------------- transmission, MA, toggles
@@ -307,7 +322,7 @@ def find_toggles(
             found.append(Toggle("limit", i if s < 0.5 else i + 1, float(u[i] + s * (u[i + 1] - u[i]))))
     if transmission is None:
         transmission = drawing_spec(result).get("transmission")
-    if transmission is not None:
+    if transmission:  # () checks none
         mu = transmission_angle(result, transmission)
         gap = np.minimum(mu, np.pi - mu)
         for g in _groups(np.isfinite(gap) & (gap <= angle_tol)):
@@ -327,23 +342,30 @@ def plot_transmission(
     against: str = "input",
     **toggle_options,
 ) -> Figure:
-    """Transmission angle (deg; when the scene defines one) and mechanical advantage, with
-    the toggle positions from ``find_toggles`` marked as vertical lines (gid ``"toggle"``,
-    labelled by kind).
+    """Transmission angle(s) (deg; when the scene defines one or they are given) and
+    mechanical advantage, with the toggle positions from ``find_toggles`` marked as vertical
+    lines (gid ``"toggle"``, labelled by kind).
 
+    `transmission`: ``(a, joint, b)``, or a list of them (a linkage of several loops, a
+    slider: one curve each, labelled ``a-joint-b``); default the drawing spec's.  `output`:
+    the coordinate or point whose mechanical advantage is drawn (``mechanical_advantage``).
     The mechanical advantage is drawn on a log scale (it spans decades near toggles).
 
     **Returns** the ``Figure`` (axes: transmission angle if defined, then MA).
     """
     if transmission is None:
         transmission = drawing_spec(result).get("transmission")
-    toggles = find_toggles(result, output=output, transmission=transmission, **toggle_options)
+    several = [] if transmission is None else [tuple(transmission)] if isinstance(transmission[0], str) else [tuple(t) for t in transmission]
+    toggles = find_toggles(result, output=output, transmission=(), **toggle_options)
+    for t in several:
+        toggles += [g for g in find_toggles(result, output=output, transmission=t, **toggle_options) if g.kind == "transmission"]
     x, xlabel = _abscissa(result, against)
     xt = np.asarray(result.motion.t if against == "time" else result.motion.u[:, 0], float)
-    fig, axes = new_figure(2 if transmission is not None else 1)
-    if transmission is not None:
+    fig, axes = screen_figure(2 if several else 1)
+    if several:
         ax = axes[0]
-        ax.plot(x, np.degrees(transmission_angle(result, transmission)), label="transmission angle")
+        for t in several:
+            ax.plot(x, np.degrees(transmission_angle(result, t)), label="transmission angle" if len(several) == 1 else "-".join(t))
         ax.axhspan(0, 40, color="red", alpha=0.06)
         ax.axhspan(140, 180, color="red", alpha=0.06)
         ax.set_ylim(0, 180)
@@ -369,19 +391,22 @@ def plot_transmission(
             seen.add(t.kind)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize="small")
-    axes[-1].set_xlabel(xlabel)
+    label_columns(axes, xlabel)
     fig.suptitle(f"{result.scene.name}: transmission and mechanical advantage")
     return fig
 
 
 # --------------------------------------------------------------------------- default set of plots
-def save_default_plots(result, outdir: str | Path, *, dpi: int = 110) -> list[Path]:
+def save_default_plots(result, outdir: str | Path, *, dpi: int = 110, columns: Sequence[str] | None = None,
+                       transmission=None, output: str | None = None) -> list[Path]:
     """Write the default plots of a run as PNG into `outdir` (created if needed).
 
     ``NAME_coordinates.png``, ``NAME_velocities.png``, ``NAME_accelerations.png``,
     ``NAME_outputs.png`` (if the scene has outputs), ``NAME_transmission.png`` (mechanical
     advantage and, if defined, transmission angle, toggles marked) and ``NAME_poses.png``
-    (the mechanism at start, middle and end).  **Returns** the paths written.
+    (the mechanism at start, middle and end).  `columns`: the outputs figure's columns
+    (``plot_outputs``' `names`; default every output); `transmission`, `output`: the
+    transmission figure's (``plot_transmission``).  **Returns** the paths written.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -391,10 +416,10 @@ def save_default_plots(result, outdir: str | Path, *, dpi: int = 110) -> list[Pa
         "velocities": plot_velocities(result),
         "accelerations": plot_accelerations(result),
     }
-    if result.outputs:
-        figs["outputs"] = plot_outputs(result)
+    if result.outputs or columns:
+        figs["outputs"] = plot_outputs(result, names=columns)
     if result.scene.mechanism.dof == 1:
-        figs["transmission"] = plot_transmission(result)
+        figs["transmission"] = plot_transmission(result, transmission=transmission, output=output)
     figs["poses"] = plot_poses(result)
     paths = []
     for key, fig in figs.items():
