@@ -45,6 +45,28 @@ def angle_value(angle, values):
     return 0.0 if total is None else total
 
 
+def lookup(coords, inputs, derived=None):
+    """``values(q, u, p)``: a name -> value lookup over coordinates, inputs, parameters and
+    the plates' derived angles ``{angle: (len_E_P1, len_E_P2, ang_P1_E_P2)}`` (the angle at
+    ``P1`` from ``P2`` to ``E`` of that triangle: ``topology._Builder.frame``)."""
+    cset, iset, derived = frozenset(coords), frozenset(inputs), derived if derived is not None else {}
+
+    def values(q, u, p):
+        def look(n):
+            if n in cset:
+                return q[n]
+            if n in iset:
+                return u[n]
+            if n in derived:
+                la, lb, a = (look(k) for k in derived[n])
+                return jnp.arctan2(lb * jnp.sin(a), la - lb * jnp.cos(a))
+            return p[n]
+
+        return look
+
+    return values
+
+
 def value(terms, values):
     """The complex position (m) of `terms`, names read by ``values(name)``."""
     out = None

@@ -5,13 +5,11 @@ Bodies are the graph's nodes (ground, the links, the slider blocks, the actuator
 its edges (a pin at a point that several bodies list, a slider's guide, a pin in a slot).
 A breadth-first spanning tree from ground reaches every body through one joint, its
 *entry*: every point of a body is then the entry's position plus one link vector,
-``len_E_P e^{i (theta_body + ang_D_E_P)}`` (E the entry, D the body's first other point).
-``theta_body`` is the direction from the body's first listed point to its second, as
-drawn, whatever its entry: where the entry is not the first point the vector carries a
-minus sign and, entered through a third point, the plate's angle at its first point
-(``_Builder.frame``).  Each joint outside the tree closes one loop: its position
-reached from one side minus from the other is zero, ``E - N + 1`` complex loops (Euler), the
-fewest equations the linkage can be written with, with the paths' common part cancelled.
+``len_E_P e^{i (theta_body + ang_D_E_P)}`` (E the entry, D its first other point; theta runs
+from the first listed point to the second as drawn: ``_Builder.frame``).  Each joint outside
+the tree closes one loop: its position reached from one side minus from the other is zero,
+``E - N + 1`` complex loops (Euler), the fewest equations the linkage can be written with,
+with the paths' common part cancelled.
 
 Everything here is static: names and term lists, no number.  The drawing's numbers are the
 parameters (``len_*``, ``ang_*``, ground points ``x_*``/``y_*``, masses ``m_*``...), so every
@@ -26,14 +24,13 @@ import functools
 import hashlib
 from collections import deque
 
-import jax.numpy as jnp
-
 from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
 from ..dynamics.model import Body, Gravity, Model, Moment, PointForce
 from ..mechanism import Mechanism
 from .elements import element_loads, element_parameters
 from .mass import shape_properties
 from .terms import Term, angle_value, negate, value
+from .terms import lookup as _lookup
 
 __all__ = ["Topology", "Built", "build", "GROUND"]
 
@@ -220,27 +217,19 @@ class _Builder:
 
     @functools.lru_cache(maxsize=None)  # noqa: B019
     def entered_elsewhere(self, body: str) -> bool:
-        """Whether the tree enters a link (or an actuator) elsewhere than at its first listed
-        point: its angle ``theta_<body>`` is still measured as drawn, from its first listed
-        point ``P1`` to its second ``P2``; the link vectors from its entry ``E`` then carry a
-        minus sign (``X - E = -len_E_X e^{i (theta + ang_P2_P1_E + ang_P1_E_X)}``, the angle
-        ``ang_P2_P1_E`` at ``P1`` from ``P2`` to ``E`` being none where ``E`` is ``P2``)."""
+        """Whether the tree enters a link (an actuator) elsewhere than at its first listed
+        point: its link vectors then carry a minus sign (``theta`` runs from ``P1`` to ``P2``)."""
         pts = self.listed(body)
         return body not in self.blocks and len(pts) >= 2 and self.entry(body) != pts[0]
 
     @functools.lru_cache(maxsize=None)  # noqa: B019
     def frame(self, body: str) -> tuple:
-        """The angle of the direction from a body's entry to its ``direction`` point: the
-        body's angle, plus where the entry is neither its first nor its second listed point
-        the plate's angle ``ang_P2_P1_E`` at its first point ``P1`` from ``P2`` to the
-        entry ``E``, less half a turn (carried by the minus sign of ``entered_elsewhere``).  That
-        angle is derived from the plate's own parameters (``derived``), not one more."""
-        pts, e = self.listed(body), self.entry(body)
-        if not self.entered_elsewhere(body) or e == pts[1] or body in self.acts:
+        """The body's angle plus, entered through a third point ``E``, the plate's angle
+        ``ang_P2_P1_E`` at ``P1`` from ``P2`` to ``E``, derived from its sides (``derived``)."""
+        if not self.entered_elsewhere(body) or body in self.acts or self.entry(body) == self.listed(body)[1]:
             return self.theta(body)
-        p1, p2 = pts[0], pts[1]
-        name = f"ang_{p2}_{p1}_{e}"
-        la, lb, a = f"len_{e}_{p1}", f"len_{e}_{p2}", f"ang_{p1}_{e}_{p2}"
+        (p1, p2, *_), e = self.listed(body), self.entry(body)
+        name, la, lb, a = f"ang_{p2}_{p1}_{e}", f"len_{e}_{p1}", f"len_{e}_{p2}", f"ang_{p1}_{e}_{p2}"
         self.recipes[la], self.recipes[lb], self.recipes[a] = ("len", e, p1), ("len", e, p2), ("ang", p1, e, p2)
         self.derived[name] = (la, lb, a)
         return self.theta(body) + ((1, name),)
@@ -346,28 +335,6 @@ def _coordinates(b: _Builder) -> tuple[list, list]:
     coords += [f"psi_{pin}" if centre else f"s_{pin}" for pin, (_, centre) in b.slots.items()]
     inputs = [d if d in b.acts else b.motion_of(d) for d in top.drivers]
     return coords, inputs
-
-
-def _lookup(coords, inputs, derived=None):
-    """``values(q, u, p)``: a name -> value lookup over coordinates, inputs, parameters and
-    the plates' derived angles (``_Builder.frame``: the angle at ``P1`` from ``P2`` to the
-    entry ``E`` of the triangle ``len_E_P1``, ``len_E_P2``, ``ang_P1_E_P2``)."""
-    cset, iset, derived = frozenset(coords), frozenset(inputs), derived if derived is not None else {}
-
-    def values(q, u, p):
-        def look(n):
-            if n in cset:
-                return q[n]
-            if n in iset:
-                return u[n]
-            if n in derived:
-                la, lb, a = (look(k) for k in derived[n])
-                return jnp.arctan2(lb * jnp.sin(a), la - lb * jnp.cos(a))
-            return p[n]
-
-        return look
-
-    return values
 
 
 def _depth(b: _Builder, body: str) -> int:
