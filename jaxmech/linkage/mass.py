@@ -12,7 +12,10 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["shape_properties", "link_mass_properties", "derived_shapes"]
+from ..mechanism import cis
+from .terms import angle_value, value
+
+__all__ = ["shape_properties", "centre_function", "link_mass_properties", "derived_shapes"]
 
 
 def _hull(names, z: np.ndarray) -> list:
@@ -76,6 +79,39 @@ def shape_properties(kind: str, z, mass, xp=jnp):
     j_o = xp.sum(c * (x * x + x * x1 + x1 * x1 + y * y + y * y1 + y1 * y1)) / 12.0
     j_g = j_o - area * (gx * gx + gy * gy)
     return gx + 1j * gy, mass * j_g / area
+
+
+def centre_function(kind: str, ring, base, th, values):
+    """``fn(q, u, p)``: the centre of a link's shape (``shape_properties``' `kind`) whose
+    corners are the position terms `ring` (``linkage.terms``), as ``G = E + c e^(i theta)``:
+    ``E`` the link's entry (`base`, the terms of the point the tree enters it through),
+    ``theta`` its angle terms `th`, and ``c`` the centre seen from ``E`` in the link's own
+    frame, a function of the parameters alone.  So the shape's formula is evaluated once
+    per sample and never differentiated along the stroke (a Watt six-bar's per-sample
+    dynamics program: 6275 -> 3771 equations).  Where a corner is not one side away from
+    the entry in the link's frame, the shape of the corners' positions themselves.
+    `values(q, u, p)` gives the terms' lookup."""
+    tails = [t[len(base):] for t in ring]
+    if any(t[:len(base)] != base or len(tail) > 1 or (tail and tail[0].angle[:len(th)] != th) for t, tail in zip(ring, tails)):
+        return lambda q, u, p: shape_properties(kind, [value(t, values(q, u, p)) for t in ring], 1.0)[0]
+    if not any(tails):
+        return lambda q, u, p: value(base, values(q, u, p))
+
+    def local(look):
+        corners = []
+        for tail in tails:
+            if not tail:
+                corners.append(jnp.asarray(0j))
+                continue
+            v = look(tail[0].length) * cis(angle_value(tail[0].angle[len(th):], look))
+            corners.append(v if tail[0].sign > 0 else -v)
+        return shape_properties(kind, corners, 1.0)[0]
+
+    def fn(q, u, p):
+        look = values(q, u, p)
+        return value(base, look) + local(look) * cis(angle_value(th, look))
+
+    return fn
 
 
 def link_mass_properties(points, mass: float) -> tuple[complex, float]:

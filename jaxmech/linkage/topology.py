@@ -28,7 +28,7 @@ from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
 from ..dynamics.model import Body, Gravity, Model, Moment, PointForce
 from ..mechanism import Mechanism
 from .elements import element_loads, element_parameters
-from .mass import shape_properties
+from .mass import centre_function, shape_properties
 from .terms import Term, angle_value, negate, value
 from .terms import lookup as _lookup
 
@@ -358,7 +358,7 @@ def _mechanism(b: _Builder, loops, coords, inputs) -> Mechanism:
     for link in b.links:
         if link in shapes and shapes[link][2]:  # the centre of mass follows the joints
             kind, ring = shapes[link][0], tuple(b.pos(link, x) for x in shapes[link][1])
-            centres[f"G_{link}"] = (kind, ring)
+            centres[f"G_{link}"] = (kind, ring, link)
         else:
             point_terms[f"G_{link}"] = b.pos(link, b._virtual(f"G_{link}", link, ("com",)))
     loop_terms = tuple(loops)
@@ -370,8 +370,8 @@ def _mechanism(b: _Builder, loops, coords, inputs) -> Mechanism:
     def point(terms):
         return lambda q, u, p: value(terms, values(q, u, p))
 
-    def centre(kind, ring):
-        return lambda q, u, p: shape_properties(kind, [value(t, values(q, u, p)) for t in ring], 1.0)[0]
+    def centre(kind, ring, link):
+        return centre_function(kind, ring, b.entry_terms(link), b.theta(link), values)
 
     params = tuple(b.recipes)
     virtual_len = {n for n, r in b.recipes.items() if r[0] == "len" and r[2] in b.virtual}
