@@ -16,9 +16,8 @@ program holds one copy of the Newton kernel:
    (point 0, the last point) and, later, at every point where the loop closes only on
    another branch (``BRANCH``: an assemblable stretch the walk never reached).
 2. **Fill steps** (``CONTINUE``): the failed points next to a point the last phase
-   converged, and up to ``FILL_REACH`` points beyond it across failed points only, from a
-   secant prediction along the stroke, one Newton solve of at most ``FILL_ITERATIONS``
-   each, step after step until no fill goes on.  This re-enters a gap
+   converged, from a secant prediction along the stroke, one Newton solve of at most
+   ``FILL_ITERATIONS`` each, step after step until no fill goes on.  This re-enters a gap
    from its far side, where the requested branch's poses are easy to reach (a stroke
    re-enters the assemblable range at a toggle, which the walk's side cannot cross).
 3. **Two-sided solves** (``TWO_SIDED``): every point still failed whose nearest converged
@@ -55,7 +54,7 @@ from .status import Status
 from .stroke_point import STARTS, fresh_starts, multistart, score, whole_turns
 from .stroke_stages import PointResults, StrokeSetup, point_derivatives
 
-__all__ = ["repair", "failed_points", "GROUP"]
+__all__ = ["repair", "failed_points", "GROUP", "ROUNDS", "FRESH", "TWO_SIDED", "CONTINUE"]
 
 #: Points solved at once, per design of the batch: a design whose whole stroke failed
 #: takes a few groups, a batch with few failures one.
@@ -68,11 +67,6 @@ RIGHT_REACH = 3
 #: A fill step's Newton iterations at most: a continued guess that needs more is left to
 #: the two-sided solves.
 FILL_ITERATIONS = 8
-#: A fill step solves the failed points up to this many points beyond a converged one at
-#: once (each from its own extrapolated guess), so a stretch after a gap is filled in a
-#: quarter of the phases: a phase's fixed cost (a loop of the whole program's arrays) is
-#: what a fill step costs, not its Newton solves.
-FILL_REACH = 4
 #: The kinds of solve (``solve_points``'s `mode`).
 FRESH, TWO_SIDED, CONTINUE = 0, 1, 2
 _FIELDS = ("q", "status", "steps", "residual", "cond", "branch")
@@ -206,48 +200,33 @@ def _shift(x, k: int, fill):
     return jnp.concatenate([pad, x[:, :-k]], axis=1) if k > 0 else jnp.concatenate([x[:, -k:], pad], axis=1)
 
 
-def _secant(q1, q2, u0, u1, u2, have2, s, max_step, reach: int = 1):
-    """A point's guess from the roots of a fill's source ``q1`` at ``u1`` (``reach`` points
-    away) and the point beyond it ``q2`` at ``u2`` (where ``have2``), ``(..., m)``: linear
-    extrapolation, dropped where its step is larger than ``reach`` times ``max_step``
-    (scaled, as Newton's)."""
+def _secant(q1, q2, u0, u1, u2, have2, s, max_step):
+    """A point's guess from its neighbours' roots along a fill (``q1`` at ``u1``, the nearer;
+    ``q2`` at ``u2`` where ``have2``), ``(..., m)``: linear extrapolation, dropped where its
+    step is larger than ``max_step`` (scaled, as Newton's)."""
     step_u = jnp.linalg.norm(u0 - u1, axis=-1)
     prev_u = jnp.linalg.norm(u1 - u2, axis=-1)
-    ratio = jnp.clip(step_u / jnp.where(prev_u > 0, prev_u, 1.0), 0.0, 2.0 * reach)
+    ratio = jnp.clip(step_u / jnp.where(prev_u > 0, prev_u, 1.0), 0.0, 2.0)
     step = (q1 - q2) * ratio[..., None]
-    keep = have2 & (prev_u > 0) & (jnp.max(jnp.abs(step) / s[..., None, :], axis=-1) <= reach * max_step)
+    keep = have2 & (prev_u > 0) & (jnp.max(jnp.abs(step) / s[..., None, :], axis=-1) <= max_step)
     return q1 + where(keep[..., None], step, 0.0)
 
 
 def frontier(setup: StrokeSetup, ctx: Context, pts: PointResults, newly):
-    """``(todo, guess, next_to)``: the failed points within ``FILL_REACH`` points of a point
-    converged by the last phase (``newly (D, nb)``) with only failed points between, and
-    each one's guess continued from the nearest such point (``_secant``, through the
-    converged point beyond it where there is one; from before the point where both sides
-    are as near): a step of a fill.  ``next_to``: the todo points right next to their
-    source (a fill tries each of those once; a farther one is tried again from nearer)."""
+    """``(todo, guess)``: the failed points next to a point converged by the last phase
+    (``newly (D, nb)``), and each one's guess continued from it (``_secant``, through the
+    converged point beyond where there is one): one step of a fill."""
     conv = pts.status == Status.CONVERGED
-    open_ = ctx.fail & ~conv
     u = jnp.broadcast_to(ctx.us, ctx.fail.shape + ctx.us.shape[-1:])
-    todo = jnp.zeros_like(open_)
-    guess = jnp.zeros_like(pts.q)
-    between = {1: open_ | True, -1: open_ | True}  # only failed points between a source and the point
-    reach = {}
-    for i in range(1, FILL_REACH + 1):
-        for k in (i, -i):  # from the point before (a forward fill), from the point after
-            sign = 1 if k > 0 else -1
-            if i > 1:
-                between[sign] = between[sign] & _shift(open_, sign * (i - 1), False)
-            reach[k] = open_ & _shift(newly, k, False) & between[sign]
-    # nearest source last (it wins), and at one distance the forward fill
-    for i in range(FILL_REACH, 0, -1):
-        for k in (-i, i):
-            sign = 1 if k > 0 else -1
-            g = _secant(_shift(pts.q, k, 0.0), _shift(pts.q, k + sign, 0.0), u, _shift(u, k, 0.0), _shift(u, k + sign, 0.0),
-                        _shift(conv, k + sign, False), setup.scales, setup.options.max_step, i)  # fmt: skip
-            todo = todo | reach[k]
-            guess = where(reach[k][..., None], g, guess)
-    return todo, guess, reach[1] | reach[-1]
+    sides = []
+    for k in (1, -1):  # from the point before (a forward fill), from the point after
+        near = _shift(newly, k, False)
+        guess = _secant(_shift(pts.q, k, 0.0), _shift(pts.q, 2 * k, 0.0), u, _shift(u, k, 0.0), _shift(u, 2 * k, 0.0),
+                        _shift(conv, 2 * k, False), setup.scales, setup.options.max_step)  # fmt: skip
+        sides.append((near, guess))
+    (fwd, g_f), (bwd, g_b) = sides
+    todo = ctx.fail & ~conv & (fwd | bwd)
+    return todo, where(fwd[..., None], g_f, g_b)
 
 
 # --------------------------------------------------------------------------- angles
@@ -314,7 +293,7 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
         conv = st.pts.status == Status.CONVERGED
         near = jnp.stack(_nearest(conv, n), axis=-1)
         solved = (st.ends[..., 0] > -2) | st.fresh
-        step, guess, next_to = frontier(setup, ctx, st.pts, st.newly)
+        step, guess = frontier(setup, ctx, st.pts, st.newly)
         todo_fresh = where(st.r == 0, ends_of_stroke, waiting(st))
         todo_two = fail & ~conv & jnp.any(near != st.ends, axis=-1)
         kind = st.kind
@@ -323,7 +302,7 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
         tried = where(kind == CONTINUE, True, solved)
         pts = solve_points(setup, ctx, st.pts, todo, kind, tried, guess, near)
         newly = todo & (pts.status == Status.CONVERGED)
-        filled = st.filled | (todo & next_to & (kind == CONTINUE))
+        filled = st.filled | (todo & (kind == CONTINUE))
         ends = where((todo & (kind == TWO_SIDED))[..., None], near, st.ends).astype(st.ends.dtype)
         fresh = st.fresh | (todo & (kind == FRESH))
         nxt = Phase(st.r, kind, pts, newly, filled, ends, fresh)
