@@ -54,7 +54,7 @@ from .status import Status
 from .stroke_point import STARTS, fresh_starts, multistart, score, whole_turns
 from .stroke_stages import PointResults, StrokeSetup, point_derivatives
 
-__all__ = ["repair", "failed_points", "GROUP", "ROUNDS", "FRESH", "TWO_SIDED", "CONTINUE"]
+__all__ = ["repair", "failed_points", "GROUP"]
 
 #: Points solved at once, per design of the batch: a design whose whole stroke failed
 #: takes a few groups, a batch with few failures one.
