@@ -429,29 +429,35 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     slot1 = (str(folder), key1)
     fresh = []
     with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
-        pending = None
+        pending = lowered = None
         if slot1 not in _PROGRAMS:
             prog = _stored_program(folder, key1)
             if prog is not None:
                 _PROGRAMS[slot1] = prog
-            else:  # XLA releases the GIL while it compiles: the second is traced meanwhile
+            else:
                 lowered = first.lower(*static1, *args1)
-                pending = pool.submit(_compile_lowered, lowered)
         try:
-            info = (_PROGRAMS[slot1] if pending is None else lowered).out_info
+            info = (_PROGRAMS[slot1] if lowered is None else lowered).out_info
             shapes2 = args2(_shapes(info))
             key2 = _key(second, static2, shapes2)
             slot2 = (str(folder), key2)
             if key2 is not None and slot2 not in _PROGRAMS:
                 prog = _stored_program(folder, key2)
                 if prog is None:
-                    prog, storable = _compile(second, static2, shapes2)
+                    lowered2 = second.lower(*static2, *shapes2)
+                    # Both lowered before either compiles, then compiled at once (XLA releases
+                    # the GIL): JAX's persistent-cache read of one (a deserialisation) while
+                    # the other was being lowered crashed jaxlib 0.10.2 (a segfault in
+                    # compare_hlo, seen once in the suite)
+                    if lowered is not None:
+                        pending = pool.submit(_compile_lowered, lowered)
+                    prog, storable = _compile_lowered(lowered2)
                     if storable:
                         fresh.append((key2, prog))
                 _PROGRAMS[slot2] = prog
         finally:
-            if pending is not None:  # registered even where the second failed to trace
-                prog, storable = pending.result()
+            if lowered is not None:  # registered even where the second failed to trace
+                prog, storable = pending.result() if pending is not None else _compile_lowered(lowered)
                 _PROGRAMS[slot1] = prog
                 if storable:
                     fresh.append((key1, prog))

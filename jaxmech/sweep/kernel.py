@@ -159,13 +159,15 @@ class _Staged:
         self.scene, self.job, self.sharding = scene, job, sharding
         first = jit(lambda p: stroke_stage(scene, job.points, job.options, False, p), in_shardings=(sharding,), out_shardings=sharding)
         lowered = first.lower(spec)
-        # XLA releases the GIL while it compiles: the second program is traced meanwhile
+        self.part_info = lowered.out_info
+        part = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), lowered.out_info)
+        second = jit(_rest(scene, job), in_shardings=(sharding, sharding), out_shardings=sharding).lower(spec, part)
+        # Both lowered before either compiles, then compiled at once (XLA releases the GIL):
+        # JAX's persistent-cache read of one (a deserialisation) while the other was being
+        # lowered crashed jaxlib 0.10.2 (a segfault in compare_hlo, seen once in the suite)
         with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
             compiling = pool.submit(lowered.compile)
-            self.part_info = lowered.out_info
-            part = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), lowered.out_info)
-            second = jit(_rest(scene, job), in_shardings=(sharding, sharding), out_shardings=sharding)
-            self.second = second.lower(spec, part).compile()
+            self.second = second.compile()
         self.first = compiling.result()
         self.size = round_up(robust_size(job.chunk), jax.device_count())
         self._repair = None
