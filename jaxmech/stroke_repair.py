@@ -64,6 +64,9 @@ ROUNDS = 3
 #: A two-sided solve starts from the converged pose after the point only where that pose is
 #: at most this many points away.
 RIGHT_REACH = 3
+#: A failed point every this many points of a stroke is assembled afresh after its two-sided
+#: solves fail (``repair``'s probes), so that a stretch between two gaps is found.
+PROBE = 8
 #: A fill step's Newton iterations at most: a continued guess that needs more is left to
 #: the two-sided solves.
 FILL_ITERATIONS = 8
@@ -286,8 +289,14 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
     walked = pts
     ends_of_stroke = fail & ((i == 0) | (i == n - 1))[None, :]
 
+    # probes: every PROBE-th point of the stroke, assembled afresh once its two-sided solves
+    # failed (an island between two gaps, farther than RIGHT_REACH from any converged point,
+    # is reached by no fill and its two-sided solves from across the gaps stall)
+    probe = (i % PROBE == 0)[None, :]
+
     def waiting(st: Phase):
-        return fail & (st.pts.status == Status.BRANCH) & ~st.fresh
+        tried_two = st.ends[..., 0] > -2
+        return fail & ~st.fresh & ((st.pts.status == Status.BRANCH) | (probe & tried_two & (st.pts.status != Status.CONVERGED)))
 
     def body(st: Phase) -> Phase:
         conv = st.pts.status == Status.CONVERGED
