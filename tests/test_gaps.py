@@ -200,6 +200,11 @@ def test_slider_crank_strokes_across_gaps(a, b, e, t0, sign):
 # toggle, where Newton from every pose nearby landed on the loop's other mode (BRANCH)
 @example(ls=[1.7078881681803042, 0.9, 0.75, 1.6143521530878466, 1.989833601230989, 1.701127240615796, 2.9385850421650175],
          h=2.091149283418641, k=0.75, gamma=-6.103515625e-05, t0=6.050165264851943, signs=(-1.0, 1.0))
+# a 17-point island between gaps of 12 and 13 points, farther than RIGHT_REACH from any
+# converged point: reached by no fill, its two-sided solves from across the gaps stall
+# (INFEASIBLE on both turns until the repair's probes)
+@example(ls=[1.2097661030852533, 2.21, 1.2771876053450457, 2.886584211987885, 1.9, 1.2866945694725183, 1.8697002290690476],
+         h=3.209127895013677, k=1.8261680458464973, gamma=-0.41687299907784847, t0=1.627434608328106, signs=(1.0, 1.0))
 def test_sixbar_strokes_across_gaps(ls, h, k, gamma, t0, signs):
     p = dict(zip("abcdefg", ls), h=h, k=k, gamma=gamma)
     us = t0 + np.linspace(0.0, 4 * np.pi, N)
