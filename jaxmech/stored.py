@@ -6,9 +6,8 @@ kinematics, inverse dynamics, a scene's model batches); ``scenes.evaluation`` ru
 two programs through ``cached_chain``.  Their top-level calls (concrete arguments) come here:
 the first process that runs a program compiles it once (``lower().compile()``, the same
 executable the jitted call would build), runs it, and stores that executable
-(``jax.experimental.serialize_executable``) on a thread of its own, so the answer does not
-wait for the write (``wait_for_stores``; done at exit); a later process loads it and calls it
-directly.  Inside a trace the jitted function runs as usual: the store is consulted only at
+(``jax.experimental.serialize_executable``) before the call returns; a later process loads
+it and calls it directly.  Inside a trace the jitted function runs as usual: the store is consulted only at
 the edge of a computation, never inside its numerical path.
 
 The store needs no JAX setting and changes none (its folder: ``cache.executables_dir()``,
@@ -48,7 +47,6 @@ stands for).
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import dataclasses
 import functools
@@ -59,7 +57,6 @@ import pickle
 import platform
 import tempfile
 import threading
-from concurrent.futures import ThreadPoolExecutor
 import zlib
 from pathlib import Path
 
@@ -263,6 +260,9 @@ def calls_lapack(compiled) -> bool:
         return True
 
 
+_LOCK = threading.Lock()  # the store's counts, read by other threads (e.g. a notebook's)
+
+
 def _store(path: Path, compiled) -> None:
     if path.with_suffix(".unloadable").exists():  # loaded once and could not run: never again
         return
@@ -284,30 +284,19 @@ def _store(path: Path, compiled) -> None:
         pass
 
 
-# Stores under way: an executable is serialised and written on a thread of its own (0.1 s for
-# a scene's program, which releases the GIL), so the first answer does not wait for it.
-_PENDING: list[threading.Thread] = []
-_LOCK = threading.Lock()
-
-
 def _store_later(path: Path, compiled) -> None:
-    thread = threading.Thread(target=_store, args=(path, compiled), name="jaxmech-store", daemon=True)
-    with _LOCK:
-        _PENDING.append(thread)
-    thread.start()
+    """Store ``compiled`` now, on this thread.  Stores and compiles on threads of their own
+    (the answer returned first, the store written behind it; two programs compiled at once)
+    crashed the suite's workers twice with jaxlib 0.10.2 (segfaults in a persistent-cache
+    read and in a compile beside another thread's XLA work, on fresh CI machines), so
+    everything XLA does for the store happens here, one thing at a time; the cost is the
+    serialisation (about 0.1 s for a scene's program) before the first answer returns."""
+    _store(path, compiled)
 
 
-@atexit.register
 def wait_for_stores() -> None:
-    """Wait until every executable this process is storing is written (done at exit, so a
-    script's programs are there for the next process; call it before starting a process
-    that should find them)."""
-    while True:
-        with _LOCK:
-            if not _PENDING:
-                return
-            thread = _PENDING.pop()
-        thread.join()
+    """Nothing to wait for: every store is written before the call that compiled it returns
+    (kept for scripts that call it before starting a process that should find them)."""
 
 
 # An executable that JAX loaded from its own persistent cache must not be stored again:
@@ -393,7 +382,7 @@ def cached_call(fn, static: tuple, args: tuple):
         except Exception:  # e.g. an executable the runtime rejects: never again this process
             _PROGRAMS[slot] = None
         else:
-            if fresh is not None:  # stored while the answer runs, on a thread of its own
+            if fresh is not None:
                 _store_later(_path(folder, key), fresh)
             return out
     _STATS["fallback"] += 1
@@ -408,10 +397,9 @@ def _shapes(tree):
 def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, args2, with_first: bool = False):
     """``second(*static2, *args2(first(*static1, *args1)))`` for two ``jit`` functions whose
     static arguments come first: two programs, each run by its stored executable where that
-    is exactly equivalent (as ``cached_call``).  Where they must be compiled, they are
-    compiled at once: XLA compiles the first on a thread of its own while the second is
-    traced and compiled here (a scene's stroke, then its kinematics and outputs: 2 cores
-    do both in about the time of the longer).  ``with_first``: returns ``(first's outputs,
+    is exactly equivalent (as ``cached_call``).  Where they must be compiled, both are
+    lowered first (the second from the first's output shapes), then compiled one after the
+    other on this thread.  ``with_first``: returns ``(first's outputs,
     second's)``.  ``args2``: a function of the first's outputs
     (arrays, or their ``ShapeDtypeStruct``s) giving the second's arguments.  With the store
     off, the programs are kept for this process only."""
@@ -428,39 +416,31 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     folder = store_dir()
     slot1 = (str(folder), key1)
     fresh = []
-    with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
-        pending = lowered = None
-        if slot1 not in _PROGRAMS:
-            prog = _stored_program(folder, key1)
-            if prog is not None:
-                _PROGRAMS[slot1] = prog
-            else:
-                lowered = first.lower(*static1, *args1)
-        try:
-            info = (_PROGRAMS[slot1] if lowered is None else lowered).out_info
-            shapes2 = args2(_shapes(info))
-            key2 = _key(second, static2, shapes2)
-            slot2 = (str(folder), key2)
-            if key2 is not None and slot2 not in _PROGRAMS:
-                prog = _stored_program(folder, key2)
-                if prog is None:
-                    lowered2 = second.lower(*static2, *shapes2)
-                    # Both lowered before either compiles, then compiled at once (XLA releases
-                    # the GIL): JAX's persistent-cache read of one (a deserialisation) while
-                    # the other was being lowered crashed jaxlib 0.10.2 (a segfault in
-                    # compare_hlo, seen once in the suite)
-                    if lowered is not None:
-                        pending = pool.submit(_compile_lowered, lowered)
-                    prog, storable = _compile_lowered(lowered2)
-                    if storable:
-                        fresh.append((key2, prog))
-                _PROGRAMS[slot2] = prog
-        finally:
-            if lowered is not None:  # registered even where the second failed to trace
-                prog, storable = pending.result() if pending is not None else _compile_lowered(lowered)
-                _PROGRAMS[slot1] = prog
+    lowered = None
+    if slot1 not in _PROGRAMS:
+        prog = _stored_program(folder, key1)
+        if prog is not None:
+            _PROGRAMS[slot1] = prog
+        else:
+            lowered = first.lower(*static1, *args1)
+    try:
+        info = (_PROGRAMS[slot1] if lowered is None else lowered).out_info
+        shapes2 = args2(_shapes(info))
+        key2 = _key(second, static2, shapes2)
+        slot2 = (str(folder), key2)
+        if key2 is not None and slot2 not in _PROGRAMS:
+            prog = _stored_program(folder, key2)
+            if prog is None:
+                prog, storable = _compile(second, static2, shapes2)
                 if storable:
-                    fresh.append((key1, prog))
+                    fresh.append((key2, prog))
+            _PROGRAMS[slot2] = prog
+    finally:
+        if lowered is not None:  # registered even where the second failed to trace
+            prog, storable = _compile_lowered(lowered)
+            _PROGRAMS[slot1] = prog
+            if storable:
+                fresh.append((key1, prog))
     try:
         out1 = _run(folder, key1, _PROGRAMS[slot1], args1)
         out2 = second(*static2, *args2(out1)) if key2 is None else _run(folder, key2, _PROGRAMS[slot2], args2(out1))
@@ -471,7 +451,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
         _STATS["fallback"] += 1
         return plain()
     if folder is not None:
-        for key, prog in fresh:  # stored while the answer runs, on threads of their own
+        for key, prog in fresh:
             _store_later(_path(folder, key), prog)
     return (out1, out2) if with_first else out2
 

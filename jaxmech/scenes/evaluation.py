@@ -5,10 +5,9 @@ the sweeps, ``jaxmech.design`` and the live view share.
 scene's constant-speed drive, with finite placeholders at failed samples; ``scene_outputs``
 adds the scene's outputs.  For concrete parameters they run as two programs: the stroke
 (``stroke_stage``: the continuation, a second of XLA compile for flap_msd) and the rest
-(``outputs_stage``: kinematics of the points and the outputs).  ``evaluate`` compiles the two
-at once, the first on a thread of its own while the second is traced (2 cores: flap_msd's
-first ``run_scene`` 2.5 s instead of 3.0 s, measured), and stores both as executables for the
-next process where the scene is one of the registry's.  The sweeps' kernels are the same two
+(``outputs_stage``: kinematics of the points and the outputs).  ``evaluate`` lowers both,
+compiles them one after the other (on two threads at once, XLA crashed with jaxlib 0.10.2)
+and stores both as executables for the next process where the scene is one of the registry's.  The sweeps' kernels are the same two
 programs, so ``run_scene`` and a one-design sweep agree bit for bit (one fused program
 rounds differently: sma_flap's accelerations moved by an ulp).
 """
@@ -221,7 +220,7 @@ def motion_and_outputs(scene, points: int, options: SolverOptions, with_outputs:
     """``(motion, {output name: values (D, N)})`` of ``scene_motion`` and ``scene_outputs``
     (their units: ``outputs.output_units``); ``{}`` without outputs.  Two programs, the
     stroke (``stroke_stage``) and the rest (``outputs_stage``): ``evaluate`` compiles them
-    at once on two threads, and the sweep kernels are the same two programs, so a design's
+    one after the other, and the sweep kernels are the same two programs, so a design's
     columns do not depend on the path.  Traceable: inside a trace the two are one program.
     ``robust``: the stroke's robust program (the default) or its straight-line one."""
     return outputs_stage(scene, points, with_outputs, p, stroke_stage(scene, points, options, robust, p))
@@ -237,7 +236,7 @@ def output_units(scene, points: int | None = None, options: SolverOptions | None
 
 def evaluate(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS):
     """``(motion, outputs)`` of D designs with concrete parameters ``p`` (``{name: (D,)}``):
-    ``stroke_stage`` (the walk) then ``outputs_stage``, compiled at once where they must be
+    ``stroke_stage`` (the walk) then ``outputs_stage``, compiled where they must be
     (``stored.cached_chain``), and, for the designs where a sample failed, ``repair_stage``
     between the two (the rule of every concrete stroke, the sweep kernels' too).  Outputs
     that do not trace (``scene.outputs`` converting values to numpy;

@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import types
-from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
@@ -152,8 +151,7 @@ class _Staged:
     """A chunk kernel as ``run_scene`` runs a scene (``scenes.evaluation.evaluate``): the
     stroke's walk (``stroke_stage``) for the chunk, its repair (``repair_stage``) for the
     designs where a sample failed, gathered ``robust_size(chunk)`` at a time and compiled
-    the first time one does, and the rest (``_rest``) for the chunk.  The walk and the rest
-    are compiled at once (the first on a thread of its own)."""
+    the first time one does, and the rest (``_rest``) for the chunk."""
 
     def __init__(self, scene: Scene, job: Job, spec: dict, sharding):
         self.scene, self.job, self.sharding = scene, job, sharding
@@ -162,13 +160,11 @@ class _Staged:
         self.part_info = lowered.out_info
         part = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), lowered.out_info)
         second = jit(_rest(scene, job), in_shardings=(sharding, sharding), out_shardings=sharding).lower(spec, part)
-        # Both lowered before either compiles, then compiled at once (XLA releases the GIL):
-        # JAX's persistent-cache read of one (a deserialisation) while the other was being
-        # lowered crashed jaxlib 0.10.2 (a segfault in compare_hlo, seen once in the suite)
-        with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
-            compiling = pool.submit(lowered.compile)
-            self.second = second.compile()
-        self.first = compiling.result()
+        # Compiled one after the other on this thread: compiled at once on two threads, the
+        # suite's workers crashed with jaxlib 0.10.2 (segfaults beside another thread's XLA
+        # work, twice on fresh CI machines; see stored._store_later)
+        self.second = second.compile()
+        self.first = lowered.compile()
         self.size = round_up(robust_size(job.chunk), jax.device_count())
         self._repair = None
 
