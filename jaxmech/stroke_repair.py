@@ -57,8 +57,11 @@ from .stroke_stages import PointResults, StrokeSetup, point_derivatives
 __all__ = ["repair", "failed_points", "GROUP"]
 
 #: Points solved at once, per design of the batch: a design whose whole stroke failed
-#: takes a few groups, a batch with few failures one.
-GROUP = 2
+#: takes many groups, a batch with few failures one.  One: a fill step (most of the
+#: repair's phases) has at most one point per design, so a wider group left half its lanes
+#: idle under ``vmap`` (2 -> 1: the gapped four-bar sweep of ``benchmarks/gaps.py`` 0.36 ->
+#: 0.27 s warm, the six-bar's 0.72 -> 0.76 s, within its noise; no status moved).
+GROUP = 1
 #: Two-sided phases at most (the first, and those after stretches found between gaps).
 ROUNDS = 3
 #: A two-sided solve starts from the converged pose after the point only where that pose is
