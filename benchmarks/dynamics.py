@@ -34,7 +34,7 @@ from jaxmech import Mechanism, cis  # noqa: E402
 from jaxmech import dynamics as D  # noqa: E402
 from jaxmech.actuators import DCMotor  # noqa: E402
 from jaxmech.continuation import solve_stroke  # noqa: E402
-from jaxmech.options import SolverOptions  # noqa: E402
+from jaxmech.solver.options import SolverOptions  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -160,7 +160,7 @@ def bench_forward(t_end, steps_list, methods, repeats):
     model, p = FOURBAR_MODEL, FOURBAR_P
     motor = DCMotor("R_a", "K_m", inductance="L_a", voltage="V")
     guess = jnp.array([0.5, 1.6])
-    from jaxmech.positions import solve
+    from jaxmech.solver.positions import solve
 
     q0 = solve(FOURBAR, {"theta2": jnp.asarray(0.0)}, p, guess).q
     t0 = time.perf_counter()

@@ -10,7 +10,7 @@ is recorded too.  Beside them, in the same run: the seeds' method for the four-b
 scipy ``fsolve`` loop with 2x2 solves for velocity and acceleration, as a new user would
 write it) and pylinkage's first call (when installed), each as a whole process.
 
-The warm run of a case also counts the stored executables it loaded (``jaxmech.stored``:
+The warm run of a case also counts the stored executables it loaded (``jaxmech._compile.stored``:
 a new process calls the stored executable without tracing, lowering or compiling it).
 ``import jaxmech`` switches no JAX cache on (it did up to 7ceb4c3): by default a case runs
 as a user who leaves JAX's persistent cache off, with the library's store alone;
@@ -69,7 +69,7 @@ def mark(name, t0):
 _EPILOGUE = """
 t_job = time.perf_counter() - t_start - t_import
 try:
-    from jaxmech.stored import store_stats as _stats, wait_for_stores
+    from jaxmech._compile.stored import store_stats as _stats, wait_for_stores
     wait_for_stores()  # after the job's time is taken: the stores run beside the answer
 except ImportError:  # a checkout from before the stored executables (--baseline)
     try:
@@ -285,7 +285,7 @@ def run_case(case: str, cache: Path, tree: Path | None = None, warm_repeats: int
 
 def run_cli(name: str, argv: list[str], cache: Path, out_dir: Path, tree: Path | None = None, warm_repeats: int = 1) -> dict:
     out: dict = {"load_average_1min_before": os.getloadavg()[0]}
-    exe = [sys.executable, "-m", "jaxmech.cli"]
+    exe = [sys.executable, "-m", "jaxmech"]
     out_dir.mkdir(parents=True, exist_ok=True)  # --out makes only the folder it names (b2d2b5b)
     for label in _labels(warm_repeats):
         wall, text, rc = _run(exe + argv + ["--out", str(out_dir / label)], _env(cache, None, tree), tree=tree)

@@ -1,4 +1,4 @@
-"""Live exploration: time of one ``jaxmech.live.update`` (a slider moved) after warm-up.
+"""Live exploration: time of one ``jaxmech.viz.live.update`` (a slider moved) after warm-up.
 
 The live notebook (``notebooks/live_flap_msd.ipynb``) calls ``update(view, **params)`` from
 its widget callback; here the same function is called without a browser.  A "slider move"
@@ -31,7 +31,7 @@ def _stats(ms):
 
 
 def run(quick: bool) -> dict:
-    from jaxmech.live import live_view, update
+    from jaxmech.viz.live import live_view, update
 
     load_before = list(os.getloadavg())
     t0 = time.perf_counter()

@@ -226,8 +226,8 @@ def _flap_sample(p, alpha):
     ``(q, dq/dalpha, d2q/dalpha2, ok)``, differentiable in ``p`` by the implicit rule."""
     from jaxmech.kinematics import input_derivatives
     from jaxmech.scenes.flap_msd import closed_form_positions, mechanism
-    from jaxmech.positions import solve_one
-    from jaxmech.status import Status
+    from jaxmech.solver.positions import solve_one
+    from jaxmech.solver.status import Status
 
     guess = closed_form_positions(jax.lax.stop_gradient(p), alpha)
     assembled = jnp.all(jnp.isfinite(guess))  # every dyad closes at this crank angle
@@ -500,8 +500,8 @@ def _arc_sample(p, s34):
     """One stroke sample by the engine's solve from the cosine-rule pose (thesis eqs.
     3.1.1-3.1.2, the flap not translated): ``(q, ok)``, differentiable by the implicit rule."""
     from jaxmech.scenes.arc_track_flap import MECHANISM
-    from jaxmech.positions import solve_one
-    from jaxmech.status import Status
+    from jaxmech.solver.positions import solve_one
+    from jaxmech.solver.status import Status
 
     a1, a2 = jax.lax.stop_gradient(p["a1"]), jax.lax.stop_gradient(p["a2"])
     s = jax.lax.stop_gradient(s34)

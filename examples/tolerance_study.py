@@ -24,8 +24,8 @@ import numpy as np
 
 from jaxmech.design.tolerance import analyse, monte_carlo
 from jaxmech.mechanism import Mechanism, cis
-from jaxmech.positions import solve_one
-from jaxmech.status import Status
+from jaxmech.solver.positions import solve_one
+from jaxmech.solver.status import Status
 
 __all__ = ["FOURBAR_DESIGNS", "FOURBAR_ALPHA", "GENERAL_FOURBAR", "PARAMS", "fourbar_figures", "flap_figures", "pose",
            "relative_tolerances", "tolerance_study"]

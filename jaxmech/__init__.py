@@ -6,6 +6,11 @@ Positions by a batched Newton solve of the loop-closure equations; every derivat
 
 from importlib import metadata as _metadata
 
+from ._moved import MOVED as _MOVED
+from ._moved import install as _install_moved
+
+_install_moved()  # the module paths before the packages (jaxmech.positions, ...): one release more, with a warning
+
 from .actuators import DCMotor as DCMotor
 from .actuators import HydraulicCylinder as HydraulicCylinder
 from .actuators import LinearSpring as LinearSpring
@@ -36,7 +41,7 @@ from .dynamics import kinetic_energy as kinetic_energy
 from .dynamics import mass_matrix as mass_matrix
 from .dynamics import potential_energy as potential_energy
 from .dynamics import statics as statics
-from .continuation import solve_stroke as solve_stroke
+from .continuation.solve import solve_stroke as solve_stroke
 from .kinematics import ConstantSpeed as ConstantSpeed
 from .kinematics import Motion as Motion
 from .kinematics import Ramp as Ramp
@@ -46,19 +51,19 @@ from .kinematics import input_derivatives as input_derivatives
 from .kinematics import motion as motion
 from .kinematics import stroke_kinematics as stroke_kinematics
 from .kinematics import time_derivatives as time_derivatives
-from .mechanism import Mechanism as Mechanism
-from .mechanism import Vars as Vars
-from .mechanism import cis as cis
-from .solution import Solution as Solution
-from .options import SolverOptions as SolverOptions
-from .implicit import implicit_positions as implicit_positions
-from .positions import solve as solve
-from .positions import solve_one as solve_one
-from .status import Status as Status
-from .status import status_counts as status_counts
-from .status import status_message as status_message
+from .mechanism.mechanism import Mechanism as Mechanism
+from .mechanism.mechanism import Vars as Vars
+from .mechanism.mechanism import cis as cis
+from .solver.solution import Solution as Solution
+from .solver.options import SolverOptions as SolverOptions
+from .solver.implicit import implicit_positions as implicit_positions
+from .solver.positions import solve as solve
+from .solver.positions import solve_one as solve_one
+from .solver.status import Status as Status
+from .solver.status import status_counts as status_counts
+from .solver.status import status_message as status_message
 
-from .cache import enable_compile_cache as enable_compile_cache
+from ._compile.cache import enable_compile_cache as enable_compile_cache
 
 
 #: Names whose modules load on first use (``jaxmech.linkage``: 15 ms of the import).
@@ -67,10 +72,10 @@ _LAZY = {"Linkage": "linkage", "load_linkage": "linkage", "drawing_from_lengths"
 
 def __getattr__(name):
     """The documented packages and the lazily loaded names (``_LAZY``), and the deprecated ones: ``jaxmech.implicit_root``
-    is ``jaxmech.implicit_positions``."""
+    is ``jaxmech.implicit_positions``, and a module's old path (``jaxmech.positions``) loads it through ``_MOVED``."""
     import importlib
 
-    if name in _PACKAGES:  # a documented package, loaded on first use (jaxmech.design, ...)
+    if name in _PACKAGES or f"{__name__}.{name}" in _MOVED:  # a documented package, loaded on first use (jaxmech.design, ...)
         return importlib.import_module(f".{name}", __name__)
     if name in _LAZY:
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)

@@ -1,5 +1,5 @@
 """Draw the figure of the home page and the README, ``docs/img/flap_msd_poses.png``: the MSD
-double flap at the start, middle and end of its stroke (``jaxmech.plot.plot_poses`` of the
+double flap at the start, middle and end of its stroke (``jaxmech.viz.plot.plot_poses`` of the
 ``flap_msd`` scene, as ``jaxmech run flap_msd`` draws it).
 
     .venv/bin/python scripts/draw_home_figure.py
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from jaxmech.plot import plot_poses
+from jaxmech.viz.plot import plot_poses
 from jaxmech.scenes import get_scene, run_scene
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "img" / "flap_msd_poses.png"

@@ -15,7 +15,7 @@ jax.config.update("jax_enable_x64", True)
 _CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(tempfile.gettempdir(), "jaxmech-test-xla-cache"))
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # as jaxmech.enable_compile_cache
-# The library's stored executables (jaxmech.stored) likewise, out of the home folder.
+# The library's stored executables (jaxmech._compile.stored) likewise, out of the home folder.
 os.environ.setdefault("JAXMECH_COMPILE_CACHE", os.path.join(tempfile.gettempdir(), "jaxmech-test-store"))
 
 # The worked studies live in examples/ at the repository root (not in the package): make

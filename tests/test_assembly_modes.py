@@ -5,7 +5,7 @@ The issue: a six-bar whose ``branch`` covered only its first loop (the README's 
 pattern applied to a six-bar) let its second loop come back from a gap (a stretch of the
 crank turn where that loop cannot be assembled) on its mirror pose, reported CONVERGED.
 Now every structural block the user's indicator leaves uncovered gets its own indicator
-(``jaxmech/branches.py``), so such a sample may be ``BRANCH``, never ``CONVERGED``.
+(``jaxmech/mechanism/branches.py``), so such a sample may be ``BRANCH``, never ``CONVERGED``.
 
 Property: random Watt-II and Stephenson-III six-bars, written by hand with one scalar
 indicator for loop 1 only, whose loop 1 is a Grashof crank-rocker (assemblable over the

@@ -1,4 +1,4 @@
-"""The ``jaxmech`` command, run as a user runs it (``python -m jaxmech.cli``), every verb and
+"""The ``jaxmech`` command, run as a user runs it (``python -m jaxmech``), every verb and
 the user's mistakes: one line on stderr, exit status 2, never a traceback."""
 
 import jax
@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from jaxmech.cli import main  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
 from jaxmech.scenes import scene_names  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,7 +38,7 @@ POS_TOL = 1e-12  # rad
 def jaxmech(*args, cwd=None, timeout=300):
     env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(CACHE), "PYTHONPATH": str(ROOT)}
     return subprocess.run(
-        [sys.executable, "-m", "jaxmech.cli", *map(str, args)],
+        [sys.executable, "-m", "jaxmech", *map(str, args)],
         capture_output=True, text=True, cwd=cwd, env=env, timeout=timeout,
     )  # fmt: skip
 
@@ -247,7 +247,7 @@ NUMPY_REPR = ("np.", "array(", "float64(", "dtype(")  # what a person must never
 def test_unwritable_destination_fails_before_computing(verb, tmp_path, capsys, monkeypatch):
     """--out under a file (not a folder) is refused in one line, exit 2, before JAX is set up
     (``_setup_jax`` is replaced by a trap: reaching it means computing would have started)."""
-    import jaxmech.cli as cli
+    import jaxmech.cli.commands as cli
 
     def trap():
         raise AssertionError("the destination was not checked before computing")
@@ -336,7 +336,7 @@ def test_animate_mp4_without_ffmpeg(tmp_path, capsys, monkeypatch):
     exit 2, before JAX is set up and with nothing written."""
     import matplotlib
 
-    import jaxmech.cli as cli
+    import jaxmech.cli.commands as cli
 
     def trap():
         raise AssertionError("ffmpeg was not looked for before computing")

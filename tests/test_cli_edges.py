@@ -23,9 +23,9 @@ from PIL import Image  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
 import jaxmech.sweep  # noqa: E402
-from jaxmech.cli import main  # noqa: E402
-from jaxmech.cli_values import figure_functions  # noqa: E402
-from jaxmech.export import export_pose  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
+from jaxmech.cli.values import figure_functions  # noqa: E402
+from jaxmech.export.pose import export_pose  # noqa: E402
 from jaxmech.scenes import get_scene  # noqa: E402
 from jaxmech.scenes.classic import FOURBAR  # noqa: E402
 from jaxmech.sweep.dataset import DatasetWriter  # noqa: E402
@@ -52,11 +52,11 @@ def _read(path):
 
 
 # ----------------------------------------------------------------------- Ctrl-C
-#: ``python -m jaxmech.cli ARGS`` with SIGINT's handler set first: a shell starts a background
+#: ``python -m jaxmech ARGS`` with SIGINT's handler set first: a shell starts a background
 #: job (a CI script run with ``&``) with SIGINT ignored and its children inherit that, so a
 #: Ctrl-C sent to the command under test, or ``_thread.interrupt_main``, would not reach it.
 CTRL_C_REACHES = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-                  "sys.argv[0] = 'jaxmech'; runpy.run_module('jaxmech.cli', run_name='__main__', alter_sys=True)")
+                  "sys.argv[0] = 'jaxmech'; runpy.run_module('jaxmech', run_name='__main__', alter_sys=True)")
 
 
 def test_ctrl_c_during_a_sweep_is_one_line_and_the_rerun_resumes(tmp_path, capsys):
@@ -95,7 +95,7 @@ def test_ctrl_c_in_a_garbage_collector_callback_still_stops(monkeypatch, capsys)
     """A Ctrl-C that lands in a callback Python cannot raise from (a ``__del__``, JAX's gc
     callback) is printed as "Exception ignored" and lost: the command goes on.  It stops
     instead, in one line."""
-    import jaxmech.cli as cli
+    import jaxmech.cli.commands as cli
 
     class Dropped:
         def __del__(self):
@@ -135,7 +135,7 @@ SYSTEM = [  # (command line, --out, what the one line says)
 @pytest.fixture
 def no_computing(monkeypatch):
     """``_setup_jax`` (the step before any computation) replaced by a trap."""
-    import jaxmech.cli as cli
+    import jaxmech.cli.commands as cli
 
     def trap():
         raise AssertionError("the destination was not checked before computing")

@@ -28,7 +28,7 @@ import pytest  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
-from jaxmech.cli import main  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
 from jaxmech.linkage.files import read_linkage_tables  # noqa: E402
 from jaxmech.linkage.simulate_file import read_simulate, run_simulation, simulation_columns  # noqa: E402
 from test_cli_edges import one_line  # noqa: E402
@@ -307,14 +307,14 @@ def test_each_mistake_is_one_line_naming_the_key(case, tmp_path, capsys, monkeyp
 def test_a_mistake_in_a_real_process_is_one_line(tmp_path):
     (tmp_path / "bar.toml").write_text(PENDULUM + FRICTION + SIMULATE)
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.run([sys.executable, "-m", "jaxmech.cli", "simulate", "bar.toml"], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "jaxmech", "simulate", "bar.toml"], capture_output=True, text=True,
                           cwd=tmp_path, env=env, timeout=300)
     assert proc.returncode == 2
     one_line(proc.stderr, "bar.toml: [simulate] needs friction_speed")
 
 
 def test_help_and_an_unwritable_destination_before_computing(tmp_path, capsys, monkeypatch):
-    import jaxmech.cli as cli
+    import jaxmech.cli.commands as cli
 
     with pytest.raises(SystemExit) as exc:
         main(["simulate", "--help"])

@@ -64,7 +64,7 @@ def test_identical_mechanisms_are_equal_and_share_compiled_code():
     np.testing.assert_allclose(np.asarray(longer[0].q[-1]), np.asarray(first[0].q[-1]), atol=1e-12)
 
 
-def _seen(env, code="import jax, jaxmech; from jaxmech.stored import store_dir; print(jax.config.jax_compilation_cache_dir, store_dir())"):
+def _seen(env, code="import jax, jaxmech; from jaxmech._compile.stored import store_dir; print(jax.config.jax_compilation_cache_dir, store_dir())"):
     env = {k: v for k, v in {**os.environ, **env}.items() if v is not None}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr
@@ -98,7 +98,7 @@ if sys.argv[3] != "-":
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 import numpy as np
 import jaxmech as jm
-from jaxmech.stored import store_stats, wait_for_stores
+from jaxmech._compile.stored import store_stats, wait_for_stores
 sys.path.insert(0, sys.argv[2])
 from test_compile_reuse import P, fourbar
 sol, d1, d2 = jm.stroke_kinematics(fourbar(), np.linspace(0.0, 2 * np.pi, 361), P, np.array([0.4, 1.7]))
@@ -166,7 +166,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 from jaxmech.scenes import get_scene, run_scene
-from jaxmech.stored import store_stats, wait_for_stores
+from jaxmech._compile.stored import store_stats, wait_for_stores
 table = run_scene(get_scene("sma_flap"), 101).table()
 np.savez(sys.argv[1], **{str(i): np.asarray(v) for i, v in enumerate(table.values())})
 wait_for_stores()
@@ -224,7 +224,7 @@ def test_a_new_drawing_of_a_compiled_topology_compiles_nothing():
 def test_a_program_that_calls_lapack_is_not_stored():
     """An executable with a LAPACK custom call crashes the process that loads it (jaxlib 0.10):
     it runs here and is never written; a LAPACK-free one is."""
-    from jaxmech import stored
+    from jaxmech._compile import stored
 
     if stored.store_dir() is None:
         import pytest
@@ -256,7 +256,7 @@ def test_a_program_that_calls_lapack_is_not_stored():
 def test_determinants_without_lapack_match_numpy():
     """The automatic assembly-mode indicator of a block larger than 3x3 is its determinant by
     elimination (no LAPACK call in a stored program)."""
-    from jaxmech.linalg import det_small
+    from jaxmech.solver.linalg import det_small
 
     rng = np.random.default_rng(3)
     for n in (1, 2, 3, 4, 5, 6):
@@ -272,7 +272,7 @@ def test_enable_default_cache_is_deprecated_and_respects_the_switch(monkeypatch)
     names its replacement; switched off, it changes nothing."""
     import pytest
 
-    from jaxmech.cache import enable_default_cache
+    from jaxmech._compile.cache import enable_default_cache
 
     monkeypatch.setenv("JAXMECH_COMPILE_CACHE", "0")
     before = dict(jax.config.values)
@@ -285,7 +285,7 @@ def test_a_model_of_the_librarys_parts_has_a_store_key_and_one_with_a_callback_h
     """A ``Model`` without ``program_key`` is known by its parts: two equal ones in any
     process have one key (its inverse-dynamics program is stored), a different gravity
     direction (a complex number) another, and a load with a function of the user's none."""
-    from jaxmech.stored import static_token
+    from jaxmech._compile.stored import static_token
 
     def model(direction=-1j, loads=()):
         return jm.Model(fourbar(), loads=(jm.Gravity(direction=direction),) + tuple(loads), params=("g",))
@@ -301,7 +301,7 @@ def test_a_loaded_executable_that_cannot_run_is_compiled_anew_and_never_loaded_a
     deserialisation, its error raised only when the result is waited for) is run through
     the jit path instead, with the right answer; a tombstone then keeps the key from being
     loaded or stored again."""
-    from jaxmech import stored
+    from jaxmech._compile import stored
 
     folder = stored.store_dir()
     if folder is None:

@@ -23,7 +23,7 @@ import numpy as np
 import jax.numpy as jnp
 import jaxmech as jm
 from jaxmech.scenes import get_scene, run_scene
-from jaxmech.stored import store_stats, wait_for_stores
+from jaxmech._compile.stored import store_stats, wait_for_stores
 from jaxmech.sweep import sweep_scene
 after_import = {k: repr(v) for k, v in jax.config.values.items()}
 scene = get_scene("fourbar")  # a registry scene: its programs are stored

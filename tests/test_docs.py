@@ -84,8 +84,8 @@ def test_theory_equations_are_mathml(site):
 
 def test_api_reference_from_docstrings(site):
     html = (site / "api" / "solve.html").read_text()
-    assert 'id="jaxmech.positions.solve"' in html and "implicit function theorem" in html
-    assert 'id="jaxmech.live.update"' in (site / "api" / "live.html").read_text()
+    assert 'id="jaxmech.solver.positions.solve"' in html and "implicit function theorem" in html
+    assert 'id="jaxmech.viz.live.update"' in (site / "api" / "live.html").read_text()
 
 
 def test_seed_pages_list_the_scene_parameters(site):

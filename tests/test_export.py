@@ -21,7 +21,7 @@ import pytest  # noqa: E402
 from helpers import fourbar_closed  # noqa: E402
 
 from jaxmech import load_linkage  # noqa: E402
-from jaxmech.export import APPID, export_pose, export_stroke, solve_pose, write_pose  # noqa: E402
+from jaxmech.export.pose import APPID, export_pose, export_stroke, solve_pose, write_pose  # noqa: E402
 from jaxmech.scenes import get_scene, run_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -183,7 +183,7 @@ def test_python_errors(tmp_path):
 
 def jaxmech(*args, cwd):
     env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(CACHE), "PYTHONPATH": str(ROOT)}
-    return subprocess.run([sys.executable, "-m", "jaxmech.cli", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "jaxmech", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, env=env, timeout=300)
 
 

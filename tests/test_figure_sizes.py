@@ -12,8 +12,8 @@ from pathlib import Path  # noqa: E402
 import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from jaxmech.cli import main  # noqa: E402
-from jaxmech.drawing import screen_figure  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
+from jaxmech.viz.drawing import screen_figure  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 WATT = str(ROOT / "examples" / "linkages" / "watt_sixbar.toml")

@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
-from jaxmech.cli import main  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
 from jaxmech.scenes.linkage_scene import linkage_scene  # noqa: E402
 
 DRAWING = """name = "press"

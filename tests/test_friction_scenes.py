@@ -45,7 +45,7 @@ from jaxmech import dynamics as D  # noqa: E402
 import test_forward_friction as PEN  # noqa: E402
 import test_friction_files as PRESS  # noqa: E402
 import test_friction_power as SC  # noqa: E402
-from jaxmech.cli import main  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
 from jaxmech.scenes import run_scene  # noqa: E402
 from jaxmech.design import scene_figure, scene_problem  # noqa: E402
 from jaxmech.scenes.columns import design_columns, design_motion  # noqa: E402

@@ -155,7 +155,7 @@ def test_implicit_rule_inside_a_scan_second_order_in_reverse_mode():
     ``x1 = 1 / (1 + h k)`` and ``d2 x1/dk2 = 2 h^2 / (1 + h k)^3``.  (Without
     ``checkpoint=True``, jax 0.10.2 gives half of it, as it does for
     ``jax.lax.custom_root``.)"""
-    from jaxmech.implicit import implicit_solution
+    from jaxmech.solver.implicit import implicit_solution
 
     def euler_stage(z, args):
         x, k = args

@@ -1,7 +1,8 @@
-"""The house rules a reader can check mechanically: modules of one concept (about 500 lines
-at most), functions of named stages (80 lines at most), a named record for more than three
-results, no private name imported from another module of the package, no absolute path of
-any machine in the repository."""
+"""The house rules a reader can check mechanically: a top level of few modules, the rest in
+folders that name the architecture; modules of one concept (about 500 lines at most),
+functions of named stages (80 lines at most), a named record for more than three results,
+no private name imported from another module of the package, no absolute path of any
+machine in the repository."""
 
 import ast
 import re
@@ -56,6 +57,16 @@ def long_tuple_returns(source: str, where: str = "") -> list:
             for fn in top for r in _own_returns(fn)
             if isinstance(r.value, ast.Tuple) and len(r.value.elts) > MAX_RESULTS
             and not any(isinstance(e, ast.Starred) for e in r.value.elts)]
+
+
+#: The package's top level: at most this many plain modules; the rest in folders that name
+#: the architecture (mechanism/, solver/, continuation/, viz/, export/, cli/, _compile/, ...).
+MAX_TOP_MODULES = 8
+
+
+def test_the_top_level_holds_few_modules():
+    top = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert len(top) <= MAX_TOP_MODULES, top
 
 
 def test_no_module_over_about_500_lines():
@@ -166,7 +177,7 @@ def test_the_private_name_rule_sees_what_it_should():
         [":2 uses syn._evaluator"]
     assert private_crossings("import jaxmech.design.synthesis as s\ns._x\n") == [":2 uses s._x"]
     assert private_crossings("import jaxmech\njaxmech.design._hidden\n") == [":2 uses jaxmech.design._hidden"]
-    assert private_crossings("from .. import xla\nxla._cache\n", package="jaxmech.design") == [":2 uses xla._cache"]
+    assert private_crossings("from .._compile import xla\nxla._cache\n", package="jaxmech.design") == [":2 uses xla._cache"]
     assert private_crossings("from .synthesis_lsq import _x\n", package="jaxmech.design") == [":1 imports _x"]
     # public names, dunders, another library's private names, a function (not a module) of jaxmech
     assert private_crossings("from jaxmech.design import synthesis as syn\nsyn.PARAMS, syn.__name__\n") == []

@@ -15,9 +15,9 @@ FOURBAR = ROOT / "examples" / "linkages" / "fourbar.toml"
 # The command line's own entry point, then what the store did in this process.
 _RUN = """
 import json, sys
-from jaxmech.cli import main
+from jaxmech.cli.commands import main
 rc = main(sys.argv[1:])
-from jaxmech.stored import store_stats, wait_for_stores
+from jaxmech._compile.stored import store_stats, wait_for_stores
 wait_for_stores()
 print(json.dumps({**store_stats(), "rc": rc}))
 """

@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
-from jaxmech.cli import main  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
 from jaxmech.scenes.linkage_scene import scene_from_file  # noqa: E402
 
 # A crank-rocker with masses and gravity (efforts and reactions are not zero).

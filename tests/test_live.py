@@ -1,4 +1,4 @@
-"""The live view (``jaxmech.live``): what ``update`` draws is the run's geometry, a design that
+"""The live view (``jaxmech.viz.live``): what ``update`` draws is the run's geometry, a design that
 cannot be assembled is shown (not raised), and the widgets call the same function."""
 
 import jax
@@ -10,7 +10,7 @@ import math  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxmech.live import live_view, sliders, update  # noqa: E402
+from jaxmech.viz.live import live_view, sliders, update  # noqa: E402
 
 N = 101  # the four-bar's compiled stroke of the CLI and plot tests
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -14,7 +14,7 @@ import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
 from jaxmech import Status  # noqa: E402
-from jaxmech import plot  # noqa: E402
+from jaxmech.viz import plot  # noqa: E402
 from jaxmech.scenes import get_scene, run_scene  # noqa: E402
 
 N = 101

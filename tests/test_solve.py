@@ -300,7 +300,7 @@ def test_two_loop_sixbar_stroke_closes_and_derivatives():
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 6, 9])
 def test_small_solves_and_condition_numbers_match_numpy(n):
     """The unrolled (n <= 4) and looped (n > 4) eliminations against LAPACK via numpy."""
-    from jaxmech.linalg import cond1, solve_small
+    from jaxmech.solver.linalg import cond1, solve_small
 
     rng = _rng(n)
     a = rng.normal(size=(n, n)) + 0.5 * n * np.eye(n)
@@ -370,7 +370,7 @@ def test_predictor_drops_terms_its_series_cannot_be_trusted_with():
     """Near a singular position q'' is huge: the second-order term must then be dropped, and
     a predicted step above max_step dropped altogether (a flap design starting near a toggle
     was predicted 2000 rad away and converged 319 turns off before this guard)."""
-    from jaxmech.continuation import predict
+    from jaxmech.continuation.solve import predict
 
     q, s = jnp.array([0.3, 1.0]), jnp.array([1.0, 1.0])
     d1 = jnp.array([[1.0], [-0.5]])

@@ -85,7 +85,7 @@ _SOLVED_BEFORE: list = []
 
 @pytest.fixture(scope="module")
 def solved(problem):
-    from jaxmech import stored
+    from jaxmech._compile import stored
 
     before = stored.store_stats()
     again = bool(_SOLVED_BEFORE)
@@ -97,7 +97,7 @@ def solved(problem):
 
 
 def test_every_start_converges_to_the_independent_optimum(problem, solved):
-    from jaxmech import stored
+    from jaxmech._compile import stored
 
     res, before, after = solved
     if stored.store_dir() is not None:  # the program is stored (or was, by an earlier run)

@@ -54,10 +54,10 @@ def eager_and_jit(mech, us, p, guess):
 
 
 def forward_walk_only(mech, us, p, guess):
-    """The forward walk alone (``stroke_stages.walk_block`` over the stroke's blocks), the
+    """The forward walk alone (``continuation.stages.walk_block`` over the stroke's blocks), the
     statuses at the stroke's points: what ``solve_stroke`` gave before the reverse walk."""
-    from jaxmech.continuation import block_layout, block_size, stroke_setup, unblock
-    from jaxmech.stroke_stages import BlockInput, StrokeCarry, walk_block
+    from jaxmech.continuation.solve import block_layout, block_size, stroke_setup, unblock
+    from jaxmech.continuation.stages import BlockInput, StrokeCarry, walk_block
 
     us = jnp.asarray(us)[:, None]
     p = {k: jnp.full((1,), v) for k, v in p.items()}
@@ -116,8 +116,8 @@ def test_batch_of_designs_with_gaps_is_bitwise_equal_eager_and_under_jit():
 
 def test_stroke_predictor_is_the_public_predict():
     """``predict`` over a block judges the series once, at the block's last step."""
-    from jaxmech.continuation import predict
-    from jaxmech.stroke_point import series_terms, trusted_terms
+    from jaxmech.continuation.solve import predict
+    from jaxmech.continuation.point import series_terms, trusted_terms
 
     q, s = jnp.array([0.3, 1.0]), jnp.array([1.0, 1.0])
     d1, d2 = jnp.array([[1.0], [-0.5]]), jnp.array([[[40.0]], [[20.0]]])
@@ -144,7 +144,7 @@ def test_throw_under_jit_is_a_clear_error():
 
 
 def test_deprecated_names_warn_and_still_work():
-    from jaxmech import implicit
+    from jaxmech.solver import implicit
 
     for old, new in implicit.DEPRECATED.items():
         with pytest.warns(DeprecationWarning, match=new):
@@ -159,7 +159,7 @@ def test_deprecated_names_warn_and_still_work():
 
 
 def test_newton_result_is_named():
-    from jaxmech.newton import NewtonResult, newton
+    from jaxmech.solver.newton import NewtonResult, newton
 
     res = newton(fourbar_mechanism, jm.SolverOptions(), jnp.array([0.5]), dict(a=1.0, b=3.0, c=2.5, d=3.5), jnp.array([0.4, 1.7]))
     assert isinstance(res, NewtonResult) and int(res.status) == S.CONVERGED
@@ -174,7 +174,7 @@ def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_
     traces only their contraction.  The values are the one program's to the last bit; the
     gradient, a jvp and jacfwd are the jitted gradient's (to rounding: other programs) and
     central differences' (on a stroke with a gap: NaN-free)."""
-    from jaxmech import continuation
+    from jaxmech.continuation import solve as continuation
 
     mech = fourbar_mechanism
     p0, u0, sign = FOURBARS[0]
@@ -226,7 +226,7 @@ def test_a_smooth_stroke_runs_the_straight_line_program_and_agrees_with_the_robu
     On a smooth stroke every point passes the first, both programs agree (two compiled
     programs: to rounding), the eager call (straight-line) and a user's ``jax.jit`` (robust)
     give the same statuses, and the poses are the closed form's."""
-    from jaxmech import continuation
+    from jaxmech.continuation import solve as continuation
 
     if case == "fourbar":
         mech, p, signs = fourbar_mechanism, dict(a=1.0, b=3.0, c=2.5, d=3.5), 1.0
@@ -300,7 +300,7 @@ def test_far_guesses_give_first_poses_within_half_a_turn_of_them():
 def test_an_eager_gradient_too_large_for_stored_jacobians_traces_attach_and_agrees(monkeypatch):
     """Past ``EAGER_JACOBIAN_MAX`` the eager autodiff traces the implicit rule itself (no
     dense Jacobians): the same gradient, to rounding."""
-    from jaxmech import stroke_attach
+    from jaxmech.continuation import attachment as stroke_attach
 
     mech = fourbar_mechanism
     p0 = dict(a=1.0, b=3.0, c=2.5, d=3.5)

@@ -1,4 +1,4 @@
-"""Block-triangular structure of the constraint equations (jaxmech.structure) and the
+"""Block-triangular structure of the constraint equations (jaxmech.mechanism.structure) and the
 block solves that use it, against the seed report's hand decomposition and numpy."""
 
 import jax
@@ -9,9 +9,9 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from jax.test_util import check_grads  # noqa: E402
 
-from jaxmech.linalg import cond1, solve_blocks  # noqa: E402
+from jaxmech.solver.linalg import cond1, solve_blocks  # noqa: E402
 from jaxmech.scenes import get_scene  # noqa: E402
-from jaxmech.structure import blocks, sparsity  # noqa: E402
+from jaxmech.mechanism.structure import blocks, sparsity  # noqa: E402
 
 from helpers import sixbar_mechanism  # noqa: E402
 

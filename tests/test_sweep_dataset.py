@@ -27,7 +27,7 @@ import pyarrow.parquet as pq  # noqa: E402
 import pytest  # noqa: E402
 
 from jaxmech import Status, __version__  # noqa: E402
-from jaxmech.cli import main  # noqa: E402
+from jaxmech.cli.commands import main  # noqa: E402
 from jaxmech.scenes.classic import FOURBAR  # noqa: E402
 from jaxmech.sweep import Figures, grid, random_designs, sweep_dataset, sweep_scene  # noqa: E402
 from jaxmech.sweep import run as sweep_run  # noqa: E402

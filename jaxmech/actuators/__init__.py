@@ -28,7 +28,7 @@ from typing import Any, NamedTuple, Protocol, Union
 
 import jax.numpy as jnp
 
-from ..mechanism import Vars
+from ..mechanism.mechanism import Vars
 
 __all__ = [
     "Spec",

@@ -14,11 +14,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..options import SolverOptions
+from ..solver.options import SolverOptions
 from ..scenes.base import Scene, as_scene
 from ..scenes.evaluation import SCENE_OPTIONS
 from ..scenes.columns import LazyColumns, design_motion
-from ..status import Status
+from ..solver.status import Status
 
 __all__ = ["SceneFigure", "as_batch", "figure_value", "peak", "scene_figure"]
 

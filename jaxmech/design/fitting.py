@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..xla import jit
+from .._compile.xla import jit
 from .figures import as_batch, figure_value
 
 __all__ = ["FitResult", "StopReason", "fit"]

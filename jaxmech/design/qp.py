@@ -27,7 +27,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..linalg import solve_small, where
+from ..solver.linalg import solve_small, where
 
 __all__ = ["solve_qp"]
 

@@ -32,7 +32,7 @@ import numpy as np
 from ..scenes.base import as_scene
 from ..scenes.columns import LazyColumns, column_names
 from ..scenes.evaluation import SCENE_OPTIONS
-from ..status import Status
+from ..solver.status import Status
 from .constrained import Stated
 from .second_order import SecondOrderResult, minimize_second_order
 from .sqp import SQPOptions

@@ -9,7 +9,7 @@ solved in epigraph form ``min t  s.t.  peak_i(x) / peak_scale <= t``, in the box
 variables, by the SQP of ``design.sqp`` with that exact Hessian, and the starts are one
 vmapped program: a batch of 4 or of 256 starting designs is one call, and the compile is
 paid once per problem and number of starts; a ``StrokeProblem``'s program is stored
-(``jaxmech.stored``), so a new process loads it instead of compiling.
+(``jaxmech._compile.stored``), so a new process loads it instead of compiling.
 
 Unassemblable trial points are the SQP's business: a trial design that does not assemble
 has an infinite penalty and the step is shortened.  A start that cannot be assembled at
@@ -32,7 +32,7 @@ import numpy as np
 
 from .constrained import starts_in_box, stated_rows
 from .nlp import STATUS_MESSAGES, Evaluation, Status, weighted_derivatives
-from ..xla import jit
+from .._compile.xla import jit
 from .sqp import SQPOptions, queue
 from .stroke_problem import StrokeProblem, stroke_evaluator, stroke_sizes
 

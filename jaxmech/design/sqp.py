@@ -42,8 +42,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..linalg import where
-from ..newton import per_lane
+from ..solver.linalg import where
+from ..solver.newton import per_lane
 from .nlp import Evaluation, Status, cholesky_small, kkt_error
 from .qp import solve_qp
 

@@ -39,15 +39,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..continuation import walk
-from ..implicit import input_derivatives
+from ..continuation.solve import walk
+from ..solver.implicit import input_derivatives
 from ..kinematics import Motion, chain_rule
-from ..linalg import inv_small, where
-from ..mechanism import Mechanism
-from ..newton import newton
-from ..options import SolverOptions
-from ..status import Status
-from ..structure import blocks
+from ..solver.linalg import inv_small, where
+from ..mechanism.mechanism import Mechanism
+from ..solver.newton import newton
+from ..solver.options import SolverOptions
+from ..solver.status import Status
+from ..mechanism.structure import blocks
 from .constrained import Stated, stated_rows
 from .nlp import RowDerivatives
 
@@ -324,7 +324,7 @@ def stroke_evaluator(problem: StrokeProblem):
 def stroke_state(problem: StrokeProblem) -> Callable:
     """The same problem as a ``state(x) -> Stated`` for ``design.constrained.minimize`` and the
     generic evaluators (positions attached by the implicit rule; values as ``stroke_evaluator``)."""
-    from ..implicit import implicit_positions
+    from ..solver.implicit import implicit_positions
     mech = problem.mechanism
 
     def state(xd):

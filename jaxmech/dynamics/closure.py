@@ -6,12 +6,12 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..linalg import cond1, small_norm, solve_small
-from ..mechanism import Mechanism
-from ..implicit import implicit_positions
-from ..newton import evaluator
-from ..branches import branch_value, has_branch, on_branch
-from ..options import SolverOptions, tolerances
+from ..solver.linalg import cond1, small_norm, solve_small
+from ..mechanism.mechanism import Mechanism
+from ..solver.implicit import implicit_positions
+from ..solver.newton import evaluator
+from ..mechanism.branches import branch_value, has_branch, on_branch
+from ..solver.options import SolverOptions, tolerances
 
 __all__ = ["close_loop"]
 

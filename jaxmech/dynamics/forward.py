@@ -19,9 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..actuators import DCMotor, parameter_names
-from ..options import SolverOptions
-from ..positions import solve
-from ..status import Status
+from ..solver.options import SolverOptions
+from ..solver.positions import solve
+from ..solver.status import Status
 from .forward_setup import (StopCause, checked_arguments, friction_speeds, initial_state, run_actuators, stop_message,
                             stroke_bounds)
 from .friction import friction_parameters
@@ -29,7 +29,7 @@ from .forward_steps import (METHODS, Chunk, Integrator, Run, StepCarry, integrat
                             stage_residual, coordinate_rates)
 from .model import Model, mechanism_params, prepare_params
 from .status import DynStatus
-from ..xla import jit
+from .._compile.xla import jit
 
 __all__ = ["METHODS", "CHUNK", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "Run",
            "integrate", "integrate_chunk", "StepCarry", "Chunk", "gathered", "forward_dynamics"]

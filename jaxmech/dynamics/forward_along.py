@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..options import SolverOptions
+from ..solver.options import SolverOptions
 from .friction import friction_parameters
 from .inverse import InverseDynamics, inverse_dynamics_at
 from .model import Model

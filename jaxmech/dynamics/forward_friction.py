@@ -31,8 +31,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..implicit import implicit_positions
-from ..linalg import solve_small
+from ..solver.implicit import implicit_positions
+from ..solver.linalg import solve_small
 from .friction import (JointFriction, friction_joints, friction_norms, friction_signs, friction_terms, joint_speeds,
                        solve_friction_loads, unit_friction_solutions)
 from .model import Model, geometry, masses

@@ -10,7 +10,7 @@ from collections.abc import Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from ..inputs import as_coords, as_inputs
+from ..solver.inputs import as_coords, as_inputs
 from .friction import friction_speeds
 from .status import DynStatus, dyn_status_message
 

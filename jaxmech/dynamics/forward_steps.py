@@ -17,10 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..linalg import solve_small
-from ..implicit import implicit_positions, implicit_solution
-from ..mechanism import Vars
-from ..options import SolverOptions
+from ..solver.linalg import solve_small
+from ..solver.implicit import implicit_positions, implicit_solution
+from ..mechanism.mechanism import Vars
+from ..solver.options import SolverOptions
 from .closure import close_loop
 from .forward_friction import friction_accelerations
 from .model import Model

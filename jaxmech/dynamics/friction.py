@@ -50,9 +50,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..actuators import resolve
-from ..implicit import implicit_solution
-from ..linalg import solve_small
-from ..status import Status
+from ..solver.implicit import implicit_solution
+from ..solver.linalg import solve_small
+from ..solver.status import Status
 from .joints import GROUND, Prismatic, Revolute, Slot, joint_name
 from .model import Model, geometry, point_of
 from .reactions import joint_axes, reaction_system, solve_reaction_system, unpack_reactions

@@ -27,7 +27,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..structure import block_order
+from ..mechanism.structure import block_order
 
 __all__ = ["Revolute", "Prismatic", "Slot", "Actuator", "JOINT_TYPES", "GROUND", "Layout", "layout", "joint_name"]
 

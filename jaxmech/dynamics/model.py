@@ -19,7 +19,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from ..actuators import Spec, parameter_names, resolve
-from ..mechanism import Mechanism, check_parameters
+from ..mechanism.mechanism import Mechanism, check_parameters
 from .joints import GROUND, JOINT_TYPES, Actuator, Layout, joint_name, layout
 
 __all__ = [

@@ -22,8 +22,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..linalg import parts, solve_small
-from ..structure import block_order
+from ..solver.linalg import parts, solve_small
+from ..mechanism.structure import block_order
 from .joints import GROUND, Actuator, Prismatic, Revolute, Slot, joint_name
 from .model import Axial, Model, Moment, PointForce, angle_of, point_of
 from .virtual_power import LoadedState

@@ -17,18 +17,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..linalg import solve_small
+from ..solver.linalg import solve_small
 from ..actuators import Spec, resolve, spec_names
-from ..implicit import implicit_positions, implicit_solution
-from ..inputs import as_coords, as_inputs
-from ..options import SolverOptions
-from ..positions import solve_one
-from ..status import Status
+from ..solver.implicit import implicit_positions, implicit_solution
+from ..solver.inputs import as_coords, as_inputs
+from ..solver.options import SolverOptions
+from ..solver.positions import solve_one
+from ..solver.status import Status
 from .closure import close_loop
 from .model import Model, prepare_params
 from .status import DynStatus
 from .virtual_power import generalized_forces
-from ..xla import jit
+from .._compile.xla import jit
 
 __all__ = ["Equilibrium", "equilibrium"]
 

@@ -31,11 +31,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..linalg import solve_small
+from ..solver.linalg import solve_small
 from ..actuators import resolve
 from ..kinematics import one_state, time_derivatives
-from ..mechanism import Vars
-from ..implicit import implicit_positions
+from ..mechanism.mechanism import Vars
+from ..solver.implicit import implicit_positions
 from .model import Axial, Gravity, Model, Moment, PointForce, Potential, geometry, masses
 
 __all__ = ["generalized_forces", "LoadedState", "loaded_state", "balance", "driving_effort", "mass_matrix", "kinetic_energy", "potential_energy"]

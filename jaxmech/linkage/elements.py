@@ -37,7 +37,7 @@ import jax.numpy as jnp
 
 from ..actuators import LinearSpring, Spec, resolve
 from ..dynamics.model import Axial, Moment
-from ..mechanism import Vars
+from ..mechanism.mechanism import Vars
 from ..names import did_you_mean, near_hint
 from .terms import angle_value
 from .values import read_names, read_number

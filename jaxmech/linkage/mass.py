@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..mechanism import cis
+from ..mechanism.mechanism import cis
 from .terms import angle_value, value
 
 __all__ = ["shape_properties", "centre_function", "link_mass_properties", "derived_shapes"]

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from ..dynamics.power import PowerBalance, power_balance
-from ..options import SolverOptions
+from ..solver.options import SolverOptions
 from .elements import DISSIPATING, STORING, load_name
 
 __all__ = ["linkage_power"]

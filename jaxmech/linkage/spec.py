@@ -15,8 +15,8 @@ from ..dynamics.inverse import InverseDynamics, inverse_dynamics
 from ..dynamics.joints import joint_name
 from ..kinematics import Motion, Samples, check_samples, drive_rates, motion
 from ..names import closest, did_you_mean, near_hint
-from ..continuation import solve_stroke
-from ..options import SolverOptions
+from ..continuation.solve import solve_stroke
+from ..solver.options import SolverOptions
 from .friction import linkage_holding, read_friction
 from .elements import drawing_values, read_elements
 from .mass import derived_shapes, link_mass_properties

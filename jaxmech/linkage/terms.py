@@ -14,7 +14,7 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from ..mechanism import cis
+from ..mechanism.mechanism import cis
 
 __all__ = ["Term", "value", "show", "negate", "angle_value"]
 

@@ -26,7 +26,7 @@ from collections import deque
 
 from ..dynamics.joints import Actuator, Prismatic, Revolute, Slot
 from ..dynamics.model import Body, Gravity, Model, Moment, PointForce
-from ..mechanism import Mechanism
+from ..mechanism.mechanism import Mechanism
 from .elements import element_loads, element_parameters
 from .mass import centre_function, shape_properties
 from .terms import Term, angle_value, negate, value

@@ -12,10 +12,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..inputs import own_params
+from ..solver.inputs import own_params
 from ..kinematics import Motion
-from ..mechanism import Mechanism
-from ..status import Status, status_counts
+from ..mechanism.mechanism import Mechanism
+from ..solver.status import Status, status_counts
 from ..units import for_reading
 from .columns import mask_failed, table_columns
 from .evaluation import evaluate
@@ -43,7 +43,7 @@ class Scene:
     - `validate`: optional ``p -> None`` raising ``ValueError`` that says what to change.
     - `plots`: optional ``(result, outdir) -> list of PNG paths``.
     - `drawing`: optional ``p -> dict`` describing how to draw the mechanism from its named
-      points (see ``jaxmech.drawing``): links, ground pivots, slots, chords, traced points.
+      points (see ``jaxmech.viz.drawing``): links, ground pivots, slots, chords, traced points.
     - `document`: the seed document and where its corrections are written down.
     - `parameters`: ``{name: (SI unit, meaning)}`` for every name in `defaults` (what
       ``jaxmech scenes SCENE`` lists, and the unit ``--set`` checks); empty for a scene

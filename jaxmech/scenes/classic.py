@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..mechanism import Mechanism, cis
+from ..mechanism.mechanism import Mechanism, cis
 from .base import Scene
 from .outputs import Outputs
 

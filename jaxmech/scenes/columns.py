@@ -19,8 +19,8 @@ import jax
 import jax.numpy as jnp
 
 from ..kinematics import point_kinematics
-from ..options import SolverOptions
-from ..status import Status
+from ..solver.options import SolverOptions
+from ..solver.status import Status
 from .evaluation import SCENE_OPTIONS, outputs_stage, scene_motion, stroke_stage
 from .outputs import merged_status, output_units, sample_status
 

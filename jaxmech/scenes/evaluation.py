@@ -23,14 +23,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..continuation import all_converged, repair_strokes, repaired_rows, robust_size, stroke, take_rows
-from ..stored import cached_call, cached_chain
+from ..continuation.solve import all_converged, repair_strokes, repaired_rows, robust_size, stroke, take_rows
+from .._compile.stored import cached_call, cached_chain
 from ..kinematics import ConstantSpeed, Motion, sample_kinematics
-from ..linalg import where
-from ..options import SolverOptions
-from ..solution import Solution
-from ..status import Status
-from ..xla import jit
+from ..solver.linalg import where
+from ..solver.options import SolverOptions
+from ..solver.solution import Solution
+from ..solver.status import Status
+from .._compile.xla import jit
 from .outputs import merged_status, run_outputs, sample_status
 from .outputs import output_units as scene_output_units
 
@@ -63,7 +63,7 @@ def scene_motion(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, 
     placeholders (the coordinates of ``scene.guess(p)``, zero derivatives), so that any
     function of the motion stays finite and differentiable; ``status`` says which samples are
     real.  The strokes of all designs are solved by one continuation (``per_design``
-    strokes), not one per design under ``vmap``.  `robust`: as ``continuation.stroke``'s.
+    strokes), not one per design under ``vmap``.  `robust`: as ``continuation.solve``'s.
     """
     return scene_kinematics(scene, points, p, scene_stroke(scene, points, p, options, robust))
 
@@ -90,7 +90,7 @@ class StrokePart(NamedTuple):
 def scene_stroke(scene, points: int, p, options: SolverOptions = SCENE_OPTIONS, robust: bool | None = None) -> StrokePart:
     """The first half of ``scene_motion``: every design's drive, sample times, guess and
     stroke solution with its input derivatives, a ``StrokePart`` (``scene_kinematics``
-    takes it).  `robust`: as ``continuation.stroke``'s."""
+    takes it).  `robust`: as ``continuation.solve``'s."""
     mech = scene.mechanism
     p, dtype = _as_dtype(scene, p)
 

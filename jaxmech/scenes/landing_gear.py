@@ -58,13 +58,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..kinematics import ConstantSpeed, Motion, input_derivatives, motion
-from ..mechanism import Mechanism, cis
-from ..options import SolverOptions
-from ..positions import solve
-from ..solution import Solution
+from ..mechanism.mechanism import Mechanism, cis
+from ..solver.options import SolverOptions
+from ..solver.positions import solve
+from ..solver.solution import Solution
 from .base import Scene
 from .outputs import Outputs
-from ..xla import jit
+from .._compile.xla import jit
 
 __all__ = ["SCENE", "OUTPUT_UNITS", "FT", "SPEED", "mechanism", "design", "design_family", "DEFAULTS", "PARAMETERS",
            "gear_angle", "constant_speed_motion", "linear_angle_motion", "retraction_time", "transmission_angle",

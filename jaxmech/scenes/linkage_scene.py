@@ -30,7 +30,7 @@ from ..dynamics.virtual_power import driving_effort, loaded_state
 from ..linkage.files import read_linkage_file
 from ..linkage.spec import Linkage
 from ..linkage.stroke_file import FileStroke, read_stroke, stroke_samples
-from ..status import Status, status_counts
+from ..solver.status import Status, status_counts
 from .base import Scene, SceneResult, run_scene
 from .outputs import STATUS, Outputs, merged_status
 

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from ..kinematics import Motion
-from ..status import Status
+from ..solver.status import Status
 
 __all__ = ["Outputs", "STATUS", "abstract_motion", "output_units", "run_outputs", "sample_status", "merged_status"]
 

@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..status import Status
+from ..solver.status import Status
 from .evaluate import design_status
 from .kernel import ChunkData
 

@@ -19,7 +19,7 @@ from ..scenes.columns import design_columns as design_columns
 from ..scenes.columns import design_motion as design_motion
 from ..scenes.columns import design_status as design_status
 from ..scenes.columns import column_names, is_drive_column, mask_failed, table_columns
-from ..status import Status
+from ..solver.status import Status
 
 __all__ = [
     "Figures",

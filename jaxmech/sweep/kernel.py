@@ -17,15 +17,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..continuation import robust_size
+from ..continuation.solve import robust_size
 from ..scenes.base import Scene
-from ..options import SolverOptions
-from ..status import Status
+from ..solver.options import SolverOptions
+from ..solver.status import Status
 from .designs import reject
 from ..scenes.columns import mask_failed, part_columns, table_columns
 from ..scenes.evaluation import outputs_stage, repair_stage, repaired_part, scene_kinematics, scene_motion, stroke_stage
 from ..scenes.outputs import output_units, run_outputs
-from ..xla import jit
+from .._compile.xla import jit
 from .evaluate import Figures, figure_names, stroke_figures
 
 __all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "outputs_mode", "default_budget", "lost_chunk",

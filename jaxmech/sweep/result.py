@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..status import Status, status_counts
+from ..solver.status import Status, status_counts
 
 __all__ = ["SweepResult"]
 

@@ -20,9 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..scenes.base import Scene, as_scene
-from ..options import SolverOptions
+from ..solver.options import SolverOptions
 from ..scenes.evaluation import SCENE_OPTIONS
-from ..status import Status
+from ..solver.status import Status
 from .dataset import (
     ROWS_PER_FILE, ROWS_PER_GROUP, ChunkReport, Dataset, DatasetWriter, manifest_of, prepare_dataset, write_manifest,
 )

@@ -59,7 +59,7 @@ def test_landing_case_is_a_scene_of_its_own(runs, tmp_path):
     """``jaxmech run arc_track_flap_landing``: its own registry name, title (the summary
     header) and file names, and its air moment from 220 N m (closed) to 650 N m (deployed),
     halved per jack (Section 5.2)."""
-    from jaxmech.cli import write_csv
+    from jaxmech.cli.commands import write_csv
 
     scene = get_scene("arc_track_flap_landing")
     assert scene is atf.LANDING_SCENE and scene.name == "arc_track_flap_landing"

@@ -13,10 +13,10 @@ import numpy as np
 
 from ...actuators import ScrewJack
 from ...dynamics import Body, Gravity, Model, Moment, generalized_forces
-from ...mechanism import Mechanism, cis
+from ...mechanism.mechanism import Mechanism, cis
 from ..base import Scene
 from ..outputs import Outputs
-from ...xla import jit
+from ..._compile.xla import jit
 
 __all__ = ["SCENE", "LANDING_SCENE", "SCENARIOS", "PARAMETERS", "THESIS_INPUTS", "MECHANISM", "scene_for", "design", "geometry", "validate", "air_moment", "screw_torques", "SCREW", "MODEL", "quasi_static", "OUTPUT_UNITS"]
 
@@ -321,7 +321,7 @@ def quasi_static_one(q, u, p):
                 F34y=jnp.imag(jnp.conj(e_s) * F42), lam=lam)
 
 
-@functools.partial(jit, stored=True)  # a new process loads it (jaxmech.stored)
+@functools.partial(jit, stored=True)  # a new process loads it (jaxmech._compile.stored)
 def _quasi_static_batch(q, u, p):
     return jax.vmap(lambda q_, u_: quasi_static_one(q_, u_, p))(q, u)
 
@@ -356,7 +356,7 @@ OUTPUT_UNITS = {"F_input": "N", "G12G": "N", "G12F": "N", "T_R": "N m", "T_L": "
 
 # --------------------------------------------------------------------------- scenes
 def _drawing(p):
-    """Drawing spec (``jaxmech.drawing``): screw B0-B with the nut's line, the flap plate
+    """Drawing spec (``jaxmech.viz.drawing``): screw B0-B with the nut's line, the flap plate
     A-F-G-D, both arc slots about A0 (the arcs their pins sweep), the chord A_i A_f of the
     design method (fixed points), traced A and D, transmission angle at A (A0-A-B0)."""
     pn = {k: np.asarray(p[k], float) for k in PARAM_NAMES}

@@ -10,9 +10,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ...continuation import solve_stroke
-from ...status import Status
-from ...xla import jit
+from ...continuation.solve import solve_stroke
+from ...solver.status import Status
+from ..._compile.xla import jit
 from .model import ALPHA_START, COORDS, DEG, SCENE, closed_form_positions, loop_determinants, mechanism
 
 __all__ = ["Toggle", "singular_positions"]

@@ -12,13 +12,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...actuators import LinearSpring, SMAWire
-from ...mechanism import Mechanism, Vars
-from ...options import SolverOptions
-from ...positions import solve
-from ...solution import Solution
+from ...mechanism.mechanism import Mechanism, Vars
+from ...solver.options import SolverOptions
+from ...solver.positions import solve
+from ...solver.solution import Solution
 from ..base import Scene
 from ..outputs import Outputs
-from ...xla import jit
+from ..._compile.xla import jit
 
 __all__ = ["SCENE", "params", "parameters", "flap_mechanism", "residual", "drive_params", "SCENE_CHAIN", "stiffness", "equilibrium", "tensions", "rigid_wire_angle", "wire_force_for_angle", "EPS_RANGE", "output_units"]
 

@@ -1,6 +1,6 @@
 """One stroke point: the guarded predictor, the checked Newton step, and fresh assembly.
 
-These act on one sample (one design, one input); ``stroke_stages`` maps them over a block
+These act on one sample (one design, one input); ``stages`` maps them over a block
 of points and designs, and ``continuation`` walks the blocks.  ``predict`` gives a point's
 guess from the last anchor's root and implicit derivatives; ``checked_step`` takes one
 plain Newton step from it and runs the kernel's tests; a point that fails them is solved
@@ -15,14 +15,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .branches import branch_value, has_branch, on_branch
-from .linalg import cond1, inv_small, small_max, small_norm, solve_blocks, where
-from .mechanism import Mechanism
-from .newton import NewtonResult, coord_scales, evaluator, newton, per_lane
-from .options import SolverOptions, tolerances
-from .status import Status
-from .structure import blocks
-from .xla import unfused
+from ..mechanism.branches import branch_value, has_branch, on_branch
+from ..solver.linalg import cond1, inv_small, small_max, small_norm, solve_blocks, where
+from ..mechanism.mechanism import Mechanism
+from ..solver.newton import NewtonResult, coord_scales, evaluator, newton, per_lane
+from ..solver.options import SolverOptions, tolerances
+from ..solver.status import Status
+from ..mechanism.structure import blocks
+from .._compile.xla import unfused
 
 __all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "multistart", "fresh_starts", "across_fold", "score", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 

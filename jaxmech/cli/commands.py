@@ -17,7 +17,7 @@ configures JAX for its own process, where the library never does: float64 on, an
 persistent compilation cache switched on (``jaxmech.enable_compile_cache``, in
 ``$XDG_CACHE_HOME/jaxmech/xla``, default ``~/.cache/jaxmech/xla``; ``JAXMECH_COMPILE_CACHE=DIR``
 moves it, ``=0`` turns it off, a ``JAX_COMPILATION_CACHE_DIR`` of your own is used as it
-is), beside the library's stored executables (``jaxmech.stored``): a second run is several
+is), beside the library's stored executables (``jaxmech._compile.stored``): a second run is several
 times faster.
 
 A user's mistake (unknown scene or parameter, with the closest valid name; a bad value; a
@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cli_values as values
-from .cli_parser import PROG, parser
-from .cli_values import UsageError
-from .names import did_you_mean
+from . import values
+from .parser import PROG, parser
+from .values import UsageError
+from ..names import did_you_mean
 
 __all__ = ["main", "is_linkage_file", "mistakes_of", "write_csv"]
 
@@ -51,7 +51,7 @@ def _setup_jax():
     ``JAXMECH_COMPILE_CACHE=0``, or a JAX cache the user set); called before any array exists."""
     import jax
 
-    from .cache import enable_compile_cache, switched_off
+    from .._compile.cache import enable_compile_cache, switched_off
 
     jax.config.update("jax_enable_x64", True)
     # an application may configure its process (the library never does): JAX's cache keeps
@@ -79,10 +79,10 @@ def mistakes_of(source: str):
 
 
 def _scene(name):
-    from .scenes import get_scene, scene_names
+    from ..scenes import get_scene, scene_names
 
     if is_linkage_file(name):
-        from .scenes.linkage_scene import scene_from_file
+        from ..scenes.linkage_scene import scene_from_file
 
         try:
             with mistakes_of(name):
@@ -97,7 +97,7 @@ def _scene(name):
 
 
 def _run(source: str, scene, points, overrides):
-    from .scenes.linkage_scene import run_file_scene  # run_scene, or a file's rocking or sampled stroke
+    from ..scenes.linkage_scene import run_file_scene  # run_scene, or a file's rocking or sampled stroke
 
     overrides = values.overrides(scene, overrides)
     with mistakes_of(source):
@@ -121,13 +121,13 @@ def _write_run(result, outdir: Path, plots: str = "all", point_kinematics: bool 
     """CSV and the plots (``--plots``: ``all``, ``summary``, ``none``) of one run into
     ``outdir``; returns the paths written.  `point_kinematics`: every named point's
     position, velocity and acceleration in the CSV too, before its status column."""
-    from .plot import save_default_plots
+    from ..viz.plot import save_default_plots
 
     name = result.scene.name
     csv_path = outdir / f"{name}.csv"
     table = result.table()
     if point_kinematics:
-        from .scenes.linkage_scene import point_columns
+        from ..scenes.linkage_scene import point_columns
 
         status = table.pop("status[-]")
         table = {**table, **point_columns(result.motion), "status[-]": status}
@@ -144,7 +144,7 @@ def _write_run(result, outdir: Path, plots: str = "all", point_kinematics: bool 
 def _plot_choice(args, result) -> dict:
     """``--plot``, ``--transmission``, ``--ma-output`` as ``save_default_plots``' options,
     every name checked against the run (``UsageError`` with a "did you mean")."""
-    from .plot import plot_columns
+    from ..viz.plot import plot_columns
 
     out = {}
     columns = [c.strip() for arg in args.plot_columns for c in arg.split(",") if c.strip()]
@@ -178,7 +178,7 @@ def _plot_choice(args, result) -> dict:
 def _summary_plots(result, outdir: Path, dpi: int = 110, columns=None) -> list[Path]:
     """Two of the default plots (``save_default_plots``' files): the poses, and the outputs
     (`columns` of them: ``--plot``; the coordinates when the scene has none)."""
-    from .plot import plot_coordinates, plot_outputs, plot_poses
+    from ..viz.plot import plot_coordinates, plot_outputs, plot_poses
 
     figs = {"outputs": lambda r: plot_outputs(r, names=columns)} if result.outputs or columns else {"coordinates": plot_coordinates}
     paths = []
@@ -191,7 +191,7 @@ def _summary_plots(result, outdir: Path, dpi: int = 110, columns=None) -> list[P
 
 # --------------------------------------------------------------------------- verbs
 def _cmd_scenes(args) -> int:
-    from .scenes import get_scene, scene_names
+    from ..scenes import get_scene, scene_names
 
     if args.scene is not None:
         print(_scene(args.scene).describe())
@@ -218,7 +218,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_animate(args) -> int:
-    from .plot import animate
+    from ..viz.plot import animate
 
     scene = _scene(args.scene)
     out = Path(args.out) if args.out else Path(f"{scene.name}.gif")
@@ -229,8 +229,8 @@ def _cmd_animate(args) -> int:
 
 
 def _cmd_export(args) -> int:
-    from .export import export_pose, export_stroke, input_value
-    from .units import for_reading
+    from ..export.pose import export_pose, export_stroke, input_value
+    from ..units import for_reading
 
     out = Path(args.out)
     scene = _scene(args.scene)
@@ -291,7 +291,7 @@ def _cmd_sweep(args) -> int:
     unknown = [n for n in named if n not in scene.defaults]
     if unknown:
         raise UsageError(f"scene {scene.name!r} has no parameter(s) {unknown}; {did_you_mean(unknown[0], scene.defaults, 'its parameters are')}")
-    from .sweep import Figures, random_designs, sweep_dataset, sweep_scene  # imported only when sweeping
+    from ..sweep import Figures, random_designs, sweep_dataset, sweep_scene  # imported only when sweeping
 
     if args.random is not None:
         box = ranges or _default_box(scene, args.vary or "geometry")
@@ -317,7 +317,7 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from .scenes import scene_names
+    from ..scenes import scene_names
 
     names = scene_names() if args.scenes is None else args.scenes
     known = scene_names()
@@ -355,7 +355,7 @@ def _cmd_report(args) -> int:
 
 
 def _cmd_simulate(args) -> int:
-    from .cli_simulate import simulate_command  # forward dynamics of a linkage file
+    from .simulate import simulate_command  # forward dynamics of a linkage file
 
     return simulate_command(args)
 
@@ -371,7 +371,7 @@ def _check_destination(args) -> None:
     if args.verb == "animate" and args.out and Path(args.out).suffix.lower() not in (".gif", ".mp4", ".html"):
         raise UsageError(f"--out must end in .gif, .mp4 or .html, got {args.out!r}")
     if args.verb == "animate" and args.out and Path(args.out).suffix.lower() == ".mp4":
-        from .drawing import NO_FFMPEG, ffmpeg_path
+        from ..viz.drawing import NO_FFMPEG, ffmpeg_path
 
         if ffmpeg_path() is None:
             raise UsageError(NO_FFMPEG)

@@ -27,12 +27,12 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .drawing import Drawer, new_figure
-from .scenes import Scene, SceneResult, get_scene
-from .scenes.outputs import merged_status, output_units, sample_status
-from .status import Status, status_counts
-from .sweep import design_motion
-from .units import for_reading
-from .xla import jit
+from ..scenes import Scene, SceneResult, get_scene
+from ..scenes.outputs import merged_status, output_units, sample_status
+from ..solver.status import Status, status_counts
+from ..sweep import design_motion
+from ..units import for_reading
+from .._compile.xla import jit
 
 __all__ = ["live_view", "update", "sliders", "evaluate"]
 

@@ -9,12 +9,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .branches import branch_value, flipped_mask, has_branch, on_branch
+from ..mechanism.branches import branch_value, flipped_mask, has_branch, on_branch
 from .linalg import cond1, entries, parts, small_max, small_norm, small_tmatmul, solve_small, where
-from .mechanism import Mechanism
+from ..mechanism.mechanism import Mechanism
 from .options import SolverOptions, tolerances
 from .status import Status
-from .structure import blocks
+from ..mechanism.structure import blocks
 
 __all__ = ["newton", "NewtonResult", "NewtonState", "newton_iteration", "evaluator", "coord_scales", "per_lane"]
 

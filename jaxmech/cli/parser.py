@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from . import cli_values as values
-from .cli_values import UsageError
+from . import values
+from .values import UsageError
 
 __all__ = ["PROG", "parser"]
 

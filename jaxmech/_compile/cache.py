@@ -3,7 +3,7 @@
 ``import jaxmech`` and every jaxmech call leave ``jax.config`` as the user set it.  Two
 caches carry compiled programs from one Python process to the next:
 
-- **the library's executable store** (``jaxmech.stored``), on by default: the library's
+- **the library's executable store** (``jaxmech._compile.stored``), on by default: the library's
   own programs (a stroke, a scene's two programs, inverse dynamics) stored whole, so a new
   process skips tracing, lowering and compiling them.  Its folder is ``executables_dir()``:
   ``$XDG_CACHE_HOME/jaxmech/executables`` (``~/.cache/jaxmech/executables``), or
@@ -51,7 +51,7 @@ def default_cache_dir() -> Path:
 
 
 def executables_dir() -> Path | None:
-    """The folder of the library's stored executables (``jaxmech.stored``): ``executables``
+    """The folder of the library's stored executables (``jaxmech._compile.stored``): ``executables``
     inside ``$JAXMECH_COMPILE_CACHE`` if it names a folder, else
     ``$XDG_CACHE_HOME/jaxmech/executables``; None when ``switched_off()``.  Read at every
     call; independent of JAX's ``jax_compilation_cache_dir``."""

@@ -10,7 +10,7 @@ Axes show angles as a reader expects them, in degrees (``rad`` -> ``deg``, ``rad
 carries its unit.  The arrays behind them (``SceneResult.table()``, its CSV) stay SI.
 
 The drawings (``draw_mechanism``, ``plot_poses``, ``animate``) and the drawing spec
-they read are in ``jaxmech.drawing``; their names are also here.
+they read are in ``jaxmech.viz.drawing``; their names are also here.
 
 ## Toggle positions
 
@@ -36,8 +36,8 @@ from .drawing import label_columns, point_positions, screen_figure
 from .drawing import draw_mechanism as draw_mechanism
 from .drawing import drawing_spec as drawing_spec
 from .drawing import plot_poses as plot_poses
-from .status import Status
-from .units import for_reading
+from ..solver.status import Status
+from ..units import for_reading
 
 __all__ = [
     "Toggle",

@@ -48,7 +48,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 
-from .units import for_reading
+from ..units import for_reading
 
 __all__ = [
     "animate",

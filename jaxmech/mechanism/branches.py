@@ -21,7 +21,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from .linalg import det_small, entries, where
+from ..solver.linalg import det_small, entries, where
 from .mechanism import Mechanism
 from .structure import blocks, coords_read
 

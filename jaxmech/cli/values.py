@@ -27,7 +27,7 @@ def parse_set(items) -> dict[str, str]:
     """``["a=1.5", "b=20deg"]`` -> ``{"a": "1.5", "b": "20deg"}``, the syntax checked (a
     number first, finite; each name once); ``UsageError`` for a bad item.  Names and
     units are checked against the scene by ``overrides``."""
-    from .units import split_quantity
+    from ..units import split_quantity
 
     out: dict[str, str] = {}
     for item in items or ():
@@ -50,7 +50,7 @@ def parse_set(items) -> dict[str, str]:
 def overrides(scene, raw: dict[str, str]) -> dict[str, float]:
     """``--set`` values in SI for ``scene``: every name a parameter of it (else the closest
     valid name), every unit one that fits the parameter's."""
-    from .units import to_si
+    from ..units import to_si
 
     out = {}
     for name, text in raw.items():

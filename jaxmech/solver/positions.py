@@ -14,16 +14,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .branches import branch_names
+from ..mechanism.branches import branch_names
 from .linalg import where
 from .implicit import implicit_positions
 from .inputs import batch_shape, prepare
-from .mechanism import Mechanism
+from ..mechanism.mechanism import Mechanism
 from .newton import newton
 from .options import SolverOptions
 from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
-from .xla import jit
+from .._compile.xla import jit
 
 __all__ = ["solve", "solve_one"]
 

@@ -18,14 +18,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .branches import branch_names, flipped_mask, has_branch
-from .implicit import implicit_input_derivatives, implicit_positions
-from .linalg import where
-from .mechanism import Mechanism
-from .solution import Solution
-from .status import Status
-from .stroke_stages import PointResults
-from .xla import jit
+from ..mechanism.branches import branch_names, flipped_mask, has_branch
+from ..solver.implicit import implicit_input_derivatives, implicit_positions
+from ..solver.linalg import where
+from ..mechanism.mechanism import Mechanism
+from ..solver.solution import Solution
+from ..solver.status import Status
+from .stages import PointResults
+from .._compile.xla import jit
 
 __all__ = ["Walked", "attach", "eager_attach", "EAGER_JACOBIAN_MAX"]
 

@@ -33,8 +33,8 @@ import jax
 import jax.numpy as jnp
 
 from .linalg import solve_blocks, solve_small, where
-from .mechanism import Mechanism
-from .structure import blocks
+from ..mechanism.mechanism import Mechanism
+from ..mechanism.structure import blocks
 
 __all__ = ["implicit_solution", "implicit_positions", "input_derivatives", "implicit_input_derivatives"]
 
@@ -45,7 +45,7 @@ DEPRECATED = {"implicit_root": "implicit_positions", "root_derivatives": "input_
 def __getattr__(name):
     if name in DEPRECATED:
         new = DEPRECATED[name]
-        warnings.warn(f"jaxmech.implicit.{name} is deprecated: use jaxmech.implicit.{new}", DeprecationWarning, stacklevel=2)
+        warnings.warn(f"jaxmech.solver.implicit.{name} is deprecated: use jaxmech.solver.implicit.{new}", DeprecationWarning, stacklevel=2)
         return globals()[new]
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

@@ -4,15 +4,15 @@ A stroke is cut into blocks of ``k`` points (``continuation``); one ``lax.scan``
 (``walk_block``) solves one block for every design, in straight-line code:
 
 1. ``block_guesses``: each point's guess from the anchor (``StrokeCarry``) by the guarded
-   predictor (``stroke_point.predict``);
-2. ``checked_block``: checked Newton steps per point (``stroke_point.checked_step``: up to
+   predictor (``point.predict``);
+2. ``checked_block``: checked Newton steps per point (``point.checked_step``: up to
    ``CHECKED_STEPS``, ``FRESH_STEPS`` in the block that starts the walk);
 3. ``block_derivatives``: every point's implicit derivatives (or the last point's);
 4. ``next_anchor``: the block's last point becomes the next anchor if it converged; a
    failed one never does (gap handling: the last trusted pose is kept, its derivatives
    dropped).
 
-The points this walk does not solve are ``stroke_repair``'s.  Shapes: ``D`` designs, ``k``
+The points this walk does not solve are ``repair``'s.  Shapes: ``D`` designs, ``k``
 points per block, ``m`` coordinates, ``dof`` inputs.
 """
 
@@ -25,12 +25,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .implicit import input_derivatives
-from .linalg import where
-from .mechanism import Mechanism
-from .options import SolverOptions
-from .status import Status
-from .stroke_point import CHECKED_STEPS, FRESH_STEPS, checked_step, predict
+from ..solver.implicit import input_derivatives
+from ..solver.linalg import where
+from ..mechanism.mechanism import Mechanism
+from ..solver.options import SolverOptions
+from ..solver.status import Status
+from .point import CHECKED_STEPS, FRESH_STEPS, checked_step, predict
 
 __all__ = [
     "StrokeSetup", "StrokeCarry", "PointResults", "BlockInput", "Derivatives",
@@ -127,7 +127,7 @@ def block_guesses(setup: StrokeSetup, carry: StrokeCarry, u_blk):
 
 
 def checked_block(setup: StrokeSetup, u_blk, guesses, fresh=False):
-    """``stroke_point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``:
+    """``point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``:
     up to ``CHECKED_STEPS`` Newton steps a point, or ``FRESH_STEPS`` in a block that starts
     the walk (``fresh``, may be traced)."""
     most = jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS)
@@ -169,7 +169,7 @@ def next_anchor(carry: StrokeCarry, points: PointResults, ders: Derivatives, u_b
 def walk_block(setup: StrokeSetup, carry: StrokeCarry, xs: BlockInput):
     """One block for every design: guesses, checked steps, the derivatives, the next anchor.
     Returns ``(StrokeCarry, PointResults)``; a point the checked steps do not bring home is
-    ``MAX_STEPS`` here (``stroke_repair`` solves it again)."""
+    ``MAX_STEPS`` here (``repair`` solves it again)."""
     u_blk = xs.u
     g = block_guesses(setup, carry, u_blk)
     chk = checked_block(setup, u_blk, g, xs.fresh)

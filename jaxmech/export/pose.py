@@ -1,7 +1,7 @@
 """CAD export: a pose of a mechanism, or its stroke, as DXF (ezdxf) or SVG, to take a
 linkage from a study into a CAD tool.
 
-What is drawn comes from the scene's drawing spec (``jaxmech.drawing``): every link, plate
+What is drawn comes from the scene's drawing spec (``jaxmech.viz.drawing``): every link, plate
 and chord on a layer of its own, named after the link (a ``Linkage``'s link names) or after
 the spec's points (``link_O2-A``, ``plate_A-F-G-D``, ``chord_C-F``); joints as circles centred
 exactly at the solved joints, on the layer of each link they join; ground pivots with a
@@ -45,8 +45,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .cad import APPID, UNIT_SCALE, Sheet, write_dxf, write_svg
-from .drawing import check_point, check_spec, spec_points
-from .units import for_reading, to_si
+from ..viz.drawing import check_point, check_spec, spec_points
+from ..units import for_reading, to_si
 
 __all__ = ["Pose", "solve_pose", "export_pose", "write_pose", "export_stroke", "input_value", "APPID"]
 
@@ -110,15 +110,15 @@ class Resolved(NamedTuple):
 def _resolve(obj, params) -> Resolved:
     """``(scene, params, names, result)`` of a ``Scene``, ``SceneResult``, ``Linkage``, a scene
     name or a linkage file's path."""
-    from .linkage import Linkage
-    from .scenes import SceneResult, get_scene
-    from .scenes.base import Scene
-    from .scenes.linkage_scene import linkage_scene, scene_from_file
+    from ..linkage import Linkage
+    from ..scenes import SceneResult, get_scene
+    from ..scenes.base import Scene
+    from ..scenes.linkage_scene import linkage_scene, scene_from_file
 
     names, result = {}, None
     if isinstance(obj, (str, Path)):
         if str(obj).lower().endswith((".toml", ".json")):
-            from .linkage.files import read_linkage_file
+            from ..linkage.files import read_linkage_file
 
             names = link_names(read_linkage_file(obj)[0])
             obj = scene_from_file(obj)
@@ -184,9 +184,9 @@ def solve_pose(obj, at=None, *, params: Mapping | None = None) -> Pose:
     """
     import jax.numpy as jnp
 
-    from .continuation import solve_stroke
-    from .scenes.evaluation import SCENE_OPTIONS
-    from .status import Status, status_message
+    from ..continuation.solve import solve_stroke
+    from ..scenes.evaluation import SCENE_OPTIONS
+    from ..solver.status import Status, status_message
 
     scene, p, names, _ = _resolve(obj, params)
     mech = scene.mechanism
@@ -273,7 +273,7 @@ def _span(zs) -> float:
 
 def _slot_angles(s, paths):
     """``(start, end)`` (rad) of a circular slot's arc: its ``angles``; or the arc its pin
-    sweeps over the stroke plus a margin (as ``jaxmech.drawing``); else the whole circle."""
+    sweeps over the stroke plus a margin (as ``jaxmech.viz.drawing``); else the whole circle."""
     if "angles" in s:
         return tuple(float(v) for v in s["angles"])
     if "pin" not in s or paths is None:
@@ -426,7 +426,7 @@ def export_stroke(obj, path, *, at=None, params: Mapping | None = None, points: 
     folder that does not exist (none is made), a stroke that cannot be assembled
     (``run_scene``) or a pose that cannot be reached.
     """
-    from .scenes import run_scene
+    from ..scenes import run_scene
 
     _checked_path(path)
     if int(swept) < 0:
@@ -438,7 +438,7 @@ def export_stroke(obj, path, *, at=None, params: Mapping | None = None, points: 
     trace = list(spec.get("trace", ())) if trace is None else ([trace] if isinstance(trace, str) else list(trace))
     for t in trace:
         check_point(scene, t)
-    from .drawing import point_positions
+    from ..viz.drawing import point_positions
 
     paths = point_positions(result, spec_points(spec) + trace)
     pose = _pose_of_result(result, 0, names) if at is None else solve_pose(scene, at, params=result.params)

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import is_linkage_file, mistakes_of, write_csv
-from .cli_values import UsageError
-from .names import did_you_mean
+from .commands import is_linkage_file, mistakes_of, write_csv
+from .values import UsageError
+from ..names import did_you_mean
 
 __all__ = ["simulate_command", "parameter_units", "summary"]
 
@@ -22,14 +22,14 @@ def parameter_units(lk, sim) -> dict[str, str]:
     """``{parameter: SI unit}`` of every parameter ``--set`` may change: the linkage's (as
     its scene's: ``scenes.linkage_scene.parameter_unit``, "-" where none) and the run's own
     (the motor's, ``torque``)."""
-    from .scenes.linkage_scene import parameter_unit
+    from ..scenes.linkage_scene import parameter_unit
 
     return {**{k: parameter_unit(k, lk) or "-" for k in lk.params}, **sim.units}
 
 
 def _overrides(lk, sim, raw: dict) -> dict[str, float]:
     """``--set`` values in SI: every name a parameter of the run, every unit one that fits."""
-    from .linkage.values import read_number
+    from ..linkage.values import read_number
 
     units = parameter_units(lk, sim)
     out = {}
@@ -47,8 +47,8 @@ def _overrides(lk, sim, raw: dict) -> dict[str, float]:
 def summary(lk, sim, tr, cols: dict) -> str:
     """A few lines: the run (steps, step, final time, status), the input and its rate at
     the start and the end (angles in degrees), the motor's peak current, why it stopped early."""
-    from .dynamics.status import DynStatus
-    from .units import for_reading
+    from ..dynamics.status import DynStatus
+    from ..units import for_reading
 
     status = int(tr.status)
     valid = np.flatnonzero(cols["status[-]"] == 0)
@@ -72,8 +72,8 @@ def summary(lk, sim, tr, cols: dict) -> str:
 
 def plot_simulation(lk, cols: dict, path: Path, dpi: int = 110) -> Path:
     """The input's position and rate (and the motor's current) against time, one PNG."""
-    from .drawing import label_columns, screen_figure
-    from .units import for_reading
+    from ..viz.drawing import label_columns, screen_figure
+    from ..units import for_reading
 
     name = lk.mechanism.inputs[0]
     keys = [k for k in cols if k.startswith(f"{name}[") or k.startswith(f"{name}_dot[")]
@@ -93,9 +93,9 @@ def plot_simulation(lk, cols: dict, path: Path, dpi: int = 110) -> Path:
 
 def simulate_command(args) -> int:
     """The ``simulate`` verb (``jaxmech.cli``): read, run, write, print; exit status 0."""
-    from .linkage.files import read_linkage_tables
-    from .linkage.simulate_file import read_simulate, run_simulation, simulation_columns
-    from .linkage.values import read_number
+    from ..linkage.files import read_linkage_tables
+    from ..linkage.simulate_file import read_simulate, run_simulation, simulation_columns
+    from ..linkage.values import read_number
 
     source = args.file
     if not is_linkage_file(source):

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .mechanism import Mechanism
+from ..mechanism.mechanism import Mechanism
 from .options import SolverOptions
 
 __all__ = ["as_inputs", "as_coords", "prepare", "batch_shape", "own_params"]

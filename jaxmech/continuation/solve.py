@@ -2,17 +2,17 @@
 repair, and the public ``solve_stroke``.
 
 A stroke ``us (N, dof)`` is cut into blocks of ``k`` consecutive points.  A ``lax.scan``
-walks the blocks in order (``stroke_stages.walk_block``); the last point of each solved
+walks the blocks in order (``stages.walk_block``); the last point of each solved
 block is the *anchor* of the next: its root ``q`` and the implicit derivatives ``dq/du``,
 ``d2q/du2`` there give every point of the next block a second-order predicted guess
-(``stroke_point.predict``), and checked Newton steps solve the whole block at once
+(``point.predict``), and checked Newton steps solve the whole block at once
 (vectorised over its points and over the designs).  A block whose guesses are good (a
 smooth stroke) takes one Newton step per point.
 
 Gaps (stretches where the mechanism cannot be assembled): an anchor that failed is never
 used.  The last trusted anchor is kept, and once a block ends in failure its derivatives
 are dropped, so the walk never extrapolates a Taylor series across a gap.  The points the
-walk does not solve (a gap, and what follows it) are ``stroke_repair``'s: one fresh
+walk does not solve (a gap, and what follows it) are ``repair``'s: one fresh
 assembly at each failed end of the stroke, continuation from there back towards the gap
 (a stroke re-enters the assemblable range at a toggle, reachable from the far side only),
 and every point still failed solved on its own from its nearest converged neighbours:
@@ -39,19 +39,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .branches import branch_value, has_branch
-from .inputs import batch_shape, prepare
-from .linalg import where
-from .mechanism import Mechanism
-from .newton import coord_scales
-from .options import SolverOptions
-from .solution import Solution, raise_if_failed, require_concrete
-from .status import Status
-from .stroke_point import checked_step, predict
-from .stroke_attach import Walked, attach, eager_attach
-from .stroke_repair import failed_points, repair
-from .stroke_stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
-from .xla import jit, unfused
+from ..mechanism.branches import branch_value, has_branch
+from ..solver.inputs import batch_shape, prepare
+from ..solver.linalg import where
+from ..mechanism.mechanism import Mechanism
+from ..solver.newton import coord_scales
+from ..solver.options import SolverOptions
+from ..solver.solution import Solution, raise_if_failed, require_concrete
+from ..solver.status import Status
+from .point import checked_step, predict
+from .attachment import Walked, attach, eager_attach
+from .repair import failed_points, repair
+from .stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
+from .._compile.xla import jit, unfused
 
 __all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "repaired_rows", "take_rows", "robust_size",
            "repair_stroke", "repair_strokes", "all_converged", "predict", "bucket", "checked_step"]
@@ -134,8 +134,8 @@ def walk_inputs(us_s, k: int, nblk: int) -> BlockInput:
 def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     """Strokes of D designs: ``us (nb, dof)`` shared or ``(D, nb, dof)`` one per design
     (bucketed: the first ``n`` points are the stroke), ``p`` leaves ``(D,)``, ``guess
-    (D, m)``.  The walk (one scan over the stroke's blocks, ``stroke_stages.walk_block``),
-    then, with ``robust``, ``stroke_repair.repair`` of the points it did not solve (under a
+    (D, m)``.  The walk (one scan over the stroke's blocks, ``stages.walk_block``),
+    then, with ``robust``, ``repair.repair`` of the points it did not solve (under a
     ``lax.cond``: skipped where every point converged).  Values only: nothing here is
     differentiated."""
     setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
@@ -153,7 +153,7 @@ def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     return Walked(points, valid, setup.b0)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4), stored=True)  # a new process loads it (jaxmech.stored)
+@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4), stored=True)  # a new process loads it (jaxmech._compile.stored)
 def _stroke_program(mech, options, derivs, single, robust, us, p, guess, n):
     """``walk`` then ``attach``: ``(Solution, d1, d2)`` with ``(D, nb)`` in front (the design
     axis dropped with ``single``; ``d1``, ``d2`` None without ``derivs``)."""
@@ -171,7 +171,7 @@ def as_points(sol: Solution, d1, d2) -> PointResults:
 
 def repair_stroke(mech, options, derivs, us, p, guess, n, walked):
     """``(Solution, d1, d2)`` of a walked stroke (the walk's ``(Solution, d1, d2)``, ``(D, nb)``
-    in front) with its failed points repaired (``stroke_repair.repair``); traceable."""
+    in front) with its failed points repaired (``repair.repair``); traceable."""
     setup, us_s, g0 = stroke_setup(mech, options, derivs, us, p, guess)
     valid = inputs_finite(us, p, guess)
     points = repair(setup, us_s, as_points(*walked), valid, n, g0)
@@ -203,7 +203,7 @@ def _repair_program(mech, options, derivs, us, p, guess, n, walked):
 def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
     its inputs are then concrete once their gradients are stopped, so this program is the
-    stored one (``stroke_attach.eager_attach`` attaches its result)."""
+    stored one (``attachment.eager_attach`` attaches its result)."""
     return walk(mech, options, derivs, us, p, guess, n, robust)
 
 

@@ -39,8 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .linalg import parts
-from .xla import unfused
+from ..solver.linalg import parts
+from .._compile.xla import unfused
 
 __all__ = ["Mechanism", "cis", "Vars", "equation_entries"]
 

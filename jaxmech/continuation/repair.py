@@ -1,18 +1,18 @@
 """The robust half of a stroke: the points the straight-line walk did not solve, solved
 again with bounded work, batched over every failed point of every design at once.
 
-The straight-line walk (``stroke_stages.walk_block``) solves a stroke forward by checked
+The straight-line walk (``stages.walk_block``) solves a stroke forward by checked
 Newton steps from a predicted guess; a point those steps do not bring home stays failed,
 and so do the points after it (the anchor stays at the last trusted pose, without its
 series).  ``repair`` takes those failures in phases of one loop; every Newton solve of a
-phase is one call of one kernel (``solve_points``: ``stroke_point.multistart`` over the
+phase is one call of one kernel (``solve_points``: ``point.multistart`` over the
 points to solve, gathered in groups of ``GROUP`` points per design, as many groups as there
 are points), so no loop's trip count is set by one design for a whole batch, and the
 program holds one copy of the Newton kernel:
 
 1. **Fresh assemblies** (``FRESH``: from the nearest converged pose before the point, else
    the design's guess; the same pose with a tenth of the step cap; then
-   ``stroke_point.STARTS`` fixed offsets around it), at each failed end of the stroke
+   ``point.STARTS`` fixed offsets around it), at each failed end of the stroke
    (point 0, the last point) and, later, at every point where the loop closes only on
    another branch (``BRANCH``: an assemblable stretch the walk never reached).
 2. **Fill steps** (``CONTINUE``): the failed points next to a point the last phase
@@ -27,11 +27,11 @@ program holds one copy of the Newton kernel:
    converge next to failed ones (a stretch between two gaps) starts fill steps again.
 
 Every phase's starts end with one from across the fold next to a root the phase found only
-on another branch (``stroke_point.across_fold``, run only then): a stretch a point or two
+on another branch (``point.across_fold``, run only then): a stretch a point or two
 long between two gaps sits next to a loop's toggle, where Newton from every pose nearby can
 land on the loop's other assembly mode.
 
-A point solved before keeps the better answer (``stroke_point.score``).  At most
+A point solved before keeps the better answer (``point.score``).  At most
 ``ROUNDS`` two-sided phases run.  Angles stay continuous as numbers (``unwrap``): each
 repaired pose is moved by whole turns, in stroke order, to within half a turn of the
 converged pose before it (else of the guess), so a stretch re-entered after a gap starts
@@ -48,11 +48,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .linalg import where
-from .newton import NewtonResult
-from .status import Status
-from .stroke_point import STARTS, fresh_starts, multistart, score, whole_turns
-from .stroke_stages import PointResults, StrokeSetup, point_derivatives
+from ..solver.linalg import where
+from ..solver.newton import NewtonResult
+from ..solver.status import Status
+from .point import STARTS, fresh_starts, multistart, score, whole_turns
+from .stages import PointResults, StrokeSetup, point_derivatives
 
 __all__ = ["repair", "failed_points", "GROUP"]
 
@@ -131,13 +131,13 @@ def _nearest(conv, n):
 
 # --------------------------------------------------------------------------- the solves
 def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, mode, tried, guess, near) -> PointResults:
-    """The points ``todo (D, nb)`` solved on their own by ``stroke_point.multistart``: a
+    """The points ``todo (D, nb)`` solved on their own by ``point.multistart``: a
     fresh assembly around the nearest converged pose before the point (else the guess)
     where ``mode`` is ``FRESH``, the two-sided starts where ``TWO_SIDED``, one start from
     ``guess (D, nb, m)`` where ``CONTINUE`` (the same `mode` for every point).  In groups of
     ``GROUP`` points per design, only as many groups as there are points.  A point solved
     before (``tried (D, nb)``) takes the new answer only where it is better
-    (``stroke_point.score``).  ``near (D, nb, 2)``: ``_nearest`` of ``pts``'s converged
+    (``point.score``).  ``near (D, nb, 2)``: ``_nearest`` of ``pts``'s converged
     points (the caller has it)."""
     mech, opts = setup.mech, setup.options
     d, nb = ctx.fail.shape

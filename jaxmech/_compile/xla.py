@@ -21,7 +21,7 @@ compiles once: then this process compiles with the defaults (``_with_options``).
 statuses, derivatives and points) comes out the same either way, to rounding.
 
 ``jit(..., stored=True)`` marks a program whose top-level calls (concrete arguments) go
-through the library's executable store (``jaxmech.stored``): the store wraps the compiled
+through the library's executable store (``jaxmech._compile.stored``): the store wraps the compiled
 program at its edge, and the function's own module never calls it.
 """
 
@@ -53,7 +53,7 @@ def jit(fun=None, *, stored: bool = False, **kwargs):
     function, which the enclosing program compiles with its own options.
 
     ``stored``: a top-level call runs the stored executable where that is exactly equivalent
-    (``jaxmech.stored.cached_call``); the static arguments must come first
+    (``jaxmech._compile.stored.cached_call``); the static arguments must come first
     (``static_argnums=(0, ..., k - 1)``) and be passed by position."""
     if fun is None:
         return functools.partial(jit, stored=stored, **kwargs)

@@ -109,8 +109,9 @@ def _processor() -> str:
 
 @functools.cache
 def source_hash() -> str:
-    """SHA-256 of every ``.py`` file of the jaxmech package (relative path and bytes)."""
-    root = Path(__file__).resolve().parent
+    """SHA-256 of every ``.py`` file of the jaxmech package, its subpackages included
+    (relative path and bytes)."""
+    root = Path(__file__).resolve().parents[1]  # jaxmech/, above this module's _compile/
     digest = hashlib.sha256()
     for f in sorted(root.rglob("*.py")):
         digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
@@ -124,7 +125,7 @@ def _jaxmech_type(t: type) -> bool:
 def static_token(x):
     """A text that determines ``x`` as a static argument of a jaxmech program, or None when
     there is none (a user's function, a mechanism that does not trace, a foreign pytree)."""
-    from .mechanism import Mechanism  # here: mechanism imports jax programs of its own
+    from ..mechanism.mechanism import Mechanism  # here: mechanism imports jax programs of its own
 
     if x is None or isinstance(x, (bool, int, float, complex, str)):  # complex: a load's direction
         return repr(x)
