@@ -63,6 +63,14 @@ def test_no_package_face_hides_a_module_of_its_package():
     for dotted in sorted({new.rsplit(".", 1)[0] for new in MOVED.values()}):
         folder = package.joinpath(*dotted.split(".")[1:])
         for f in sorted(folder.glob("*.py")):
-            if f.stem != "__init__":
+            if f.stem not in ("__init__", "__main__"):  # a __main__ runs when imported
                 importlib.import_module(f"{dotted}.{f.stem}")
                 assert isinstance(getattr(importlib.import_module(dotted), f.stem), types.ModuleType), f"{dotted}.{f.stem}"
+
+
+def test_python_m_jaxmech_cli_still_runs_the_command():
+    """``python -m jaxmech.cli`` (the command line was a module before it became a package)
+    still runs the ``jaxmech`` command: its usage line."""
+    out = subprocess.run([sys.executable, "-m", "jaxmech.cli", "--help"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.startswith("usage: jaxmech")
