@@ -10,7 +10,6 @@ import math  # noqa: E402
 import os  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -22,9 +21,6 @@ from jaxmech.scenes import scene_names  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LINKAGES = ROOT / "tests" / "data" / "linkages"  # broken linkage files, one mistake each
-# Compiled kernels are cached between the subprocesses (and between test sessions: the
-# cache is keyed by the program, so a stale entry is never used); kept out of the home.
-CACHE = Path(tempfile.gettempdir()) / "jaxmech-test-xla-cache"
 FOURBAR_COLUMNS = [
     "t[s]", "theta2[rad]", "theta2_dot[rad/s]", "theta2_ddot[rad/s^2]",
     "theta3[rad]", "theta3_dot[rad/s]", "theta3_ddot[rad/s^2]",
@@ -36,7 +32,7 @@ POS_TOL = 1e-12  # rad
 
 
 def jaxmech(*args, cwd=None, timeout=300):
-    env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(CACHE), "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.run(
         [sys.executable, "-m", "jaxmech", *map(str, args)],
         capture_output=True, text=True, cwd=cwd, env=env, timeout=timeout,

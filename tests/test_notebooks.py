@@ -11,7 +11,6 @@ test's); the per-cell timeout only catches a hang.
 
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -22,12 +21,11 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 TIMEOUT = 900  # s per cell: catches a hang, never a slow machine (the notebooks take seconds to a minute)
-CACHE = Path(tempfile.gettempdir()) / "jaxmech-test-xla-cache"
 KERNEL = "python3"
 
 
 def _execute(nb, cwd):
-    env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(CACHE), "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
     client = NotebookClient(nb, timeout=TIMEOUT, kernel_name=KERNEL, resources={"metadata": {"path": str(cwd)}})
     start = time.perf_counter()
     client.execute(env=env)  # raises CellExecutionError (with the traceback) on any error
