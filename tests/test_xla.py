@@ -58,7 +58,9 @@ ROUNDING_EPS = 16
 
 
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="the options are the CPU compiler's; other backends refuse them")
-@pytest.mark.parametrize("scene_name", ["fourbar", "flap_msd", "sma_flap"])
+# flap_msd left out: XLA's default CPU options (the fusion emitters) segfaulted compiling its
+# stroke in CI (jaxlib 0.10.2, backend_compile, 2026-11-28); the library never compiles with them
+@pytest.mark.parametrize("scene_name", ["fourbar", "sma_flap"])
 def test_compiler_options_give_the_same_values(scene_name):
     """The library compiles its programs with ``xla.COMPILER_OPTIONS`` (the classic CPU
     emitters, for compile time): a whole stroke with its derivatives and points comes out as
