@@ -76,6 +76,11 @@ def enable_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s
     own default, 1 s, misses most of jaxmech's, which are small on purpose).  The library
     itself never calls it; the ``jaxmech`` command does, for its own process.
 
+    With jaxlib 0.10.2, processes that shared one cache folder while compiling at once (the
+    test suite's workers) crashed inside JAX's cache read and write (three segfaults in
+    ``compilation_cache.get_executable_and_time`` / ``put_executable_and_time``): give
+    processes that run at the same time folders of their own.
+
     Returns the folder in use, or None when it cannot be created (a read-only home: nothing
     is changed).
     """
