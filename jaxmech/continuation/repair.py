@@ -313,7 +313,8 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
         # a fill writes only what it converges (a better answer than any failure)
         tried = where(kind == CONTINUE, True, solved)
         pts = solve_points(setup, ctx, st.pts, todo, kind, tried, guess, near)
-        newly = todo & (pts.status == Status.CONVERGED)
+        # a fresh phase after a two-sided one keeps that one's new points for the fills
+        newly = (todo & (pts.status == Status.CONVERGED)) | ((kind == FRESH) & st.newly)
         filled = st.filled | (todo & (kind == CONTINUE))
         ends = where((todo & (kind == TWO_SIDED))[..., None], near, st.ends).astype(st.ends.dtype)
         fresh = st.fresh | (todo & (kind == FRESH))
@@ -322,7 +323,9 @@ def repair(setup: StrokeSetup, us, pts: PointResults, valid, n, g0) -> PointResu
         again = (st.r + 1 < ROUNDS) & jnp.any(waiting(nxt))
         # a two-sided solve that converged a point next to failed ones (a stretch between
         # gaps) starts a fill too, while rounds are left
-        after_two = where(more_fill & (st.r + 1 < ROUNDS), CONTINUE, where(again, FRESH, DONE))
+        # the probes first: fills from the two-sided solves' points go on after them (with
+        # the fills first, a stroke whose every round starts fills never ran its probes)
+        after_two = where(again, FRESH, where(more_fill & (st.r + 1 < ROUNDS), CONTINUE, DONE))
         kind_next = where(kind == TWO_SIDED, after_two, where(more_fill, CONTINUE, TWO_SIDED))
         return nxt._replace(r=st.r + (kind == TWO_SIDED).astype(st.r.dtype), kind=kind_next.astype(st.kind.dtype))
 

@@ -145,7 +145,7 @@ def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     valid = inputs_finite(us, p, guess)  # (D, nb)
     u_first = jnp.broadcast_to(us_s[..., 0, :], (d, us.shape[-1]))
     m, dof = mech.m, us.shape[-1]
-    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first)
+    init = StrokeCarry(g0, jnp.zeros((d, m, dof), g0.dtype), jnp.zeros((d, m, dof, dof), g0.dtype), u_first, jnp.zeros((d,), jnp.int32))
     _, out = jax.lax.scan(functools.partial(walk_block, setup), init, walk_inputs(us_s, k, nblk))
     points = jax.tree_util.tree_map(lambda x: unblock(x, d, k, nb), out)
     if robust:
@@ -247,12 +247,17 @@ def _put_rows(tree, idx, rows):
     return jax.tree_util.tree_map(lambda x, r: x.at[idx].set(r, mode="drop"), tree, rows)
 
 
-def repaired_rows(straight, passed: np.ndarray, repair_rows, size: int):
+def repaired_rows(straight, passed: np.ndarray, repair_rows, size: int, work: np.ndarray | None = None):
     """``straight`` (design axis first) with the rows of the designs that did not pass
     replaced by ``repair_rows(idx)``'s (``idx``: ``size`` design indices, the failed ones in
     order, padded with a design that passed (nothing to repair: it costs nothing), else
-    the first failed one).  Gathered and scattered on the device: no host copies."""
+    the first failed one).  ``work`` (per design, optional): the failed designs go in
+    ascending order of it (stable), so that designs with little to repair share a call
+    instead of waiting on the phases of designs with a gap (a design's rows do not depend
+    on the others of its call).  Gathered and scattered on the device: no host copies."""
     failed = np.flatnonzero(~passed)
+    if work is not None:
+        failed = failed[np.argsort(np.asarray(work)[failed], kind="stable")]
     good = np.flatnonzero(passed)
     out = straight
     for start in range(0, failed.size, size):

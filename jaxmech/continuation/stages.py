@@ -66,12 +66,14 @@ class StrokeSetup:
 class StrokeCarry(NamedTuple):
     """The scan's state between blocks: the anchor (`q_anchor (D, m)`, its ``dq/du``
     `d1 (D, m, dof)` and ``d2q/du2`` `d2 (D, m, dof, dof)`, zero after a gap, and its input
-    `u_anchor (D, dof)`)."""
+    `u_anchor (D, dof)`), and the blocks since the anchor's (`lost (D,)`, int32: 0 where the
+    last block ended converged)."""
 
     q_anchor: jax.Array
     d1: jax.Array
     d2: jax.Array
     u_anchor: jax.Array
+    lost: jax.Array
 
 
 class PointResults(NamedTuple):
@@ -108,6 +110,10 @@ class BlockInput(NamedTuple):
     fresh: jax.Array
 
 
+#: Blocks after a failed block end whose points get ``FRESH_STEPS`` (``walk_block``).
+RETRY_BLOCKS = 2
+
+
 # --------------------------------------------------------------------------- mapping helpers
 def per_block(setup: StrokeSetup, fn, u_blk, *args):
     """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points
@@ -128,11 +134,13 @@ def block_guesses(setup: StrokeSetup, carry: StrokeCarry, u_blk):
 
 def checked_block(setup: StrokeSetup, u_blk, guesses, fresh=False):
     """``point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``:
-    up to ``CHECKED_STEPS`` Newton steps a point, or ``FRESH_STEPS`` in a block that starts
-    the walk (``fresh``, may be traced)."""
-    most = jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS)
-    step = lambda u, p_, b_, g_: checked_step(setup.mech, setup.options, u, p_, g_, b_, most)  # noqa: E731
-    return per_block(setup, step, u_blk, guesses)
+    up to ``CHECKED_STEPS`` Newton steps a point, or ``FRESH_STEPS`` where the guess has no
+    series (``fresh``: the block that starts the walk, or per design ``(D,)``; may be
+    traced)."""
+    most = jnp.broadcast_to(jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS), guesses.shape[:1])
+    step = lambda u, p_, b_, most_, g_: checked_step(setup.mech, setup.options, u, p_, g_, b_, most_)  # noqa: E731
+    inner = lambda u_d, p_, b_, most_, g_d: jax.vmap(lambda u_, g_: step(u_, p_, b_, most_, g_))(u_d, g_d)  # noqa: E731
+    return jax.vmap(inner, (setup.ax, 0, 0, 0, 0))(u_blk, setup.p, setup.b0, most, guesses)
 
 
 # A nested jit: programs of a mechanism with the same shapes share its trace.
@@ -163,7 +171,7 @@ def next_anchor(carry: StrokeCarry, points: PointResults, ders: Derivatives, u_b
     last_ok = points.status[:, -1] == Status.CONVERGED
     q_next = where(last_ok[:, None], points.q[:, -1], carry.q_anchor)
     u_next = where(last_ok[:, None], u_blk[..., -1, :], carry.u_anchor)
-    return StrokeCarry(q_next, ders.end_d1, ders.end_d2, u_next)
+    return StrokeCarry(q_next, ders.end_d1, ders.end_d2, u_next, where(last_ok, 0, carry.lost + 1).astype(carry.lost.dtype))
 
 
 def walk_block(setup: StrokeSetup, carry: StrokeCarry, xs: BlockInput):
@@ -172,7 +180,13 @@ def walk_block(setup: StrokeSetup, carry: StrokeCarry, xs: BlockInput):
     ``MAX_STEPS`` here (``repair`` solves it again)."""
     u_blk = xs.u
     g = block_guesses(setup, carry, u_blk)
-    chk = checked_block(setup, u_blk, g, xs.fresh)
+    # the first blocks after a failed block end predict from the last trusted pose without
+    # its series: their guesses get the fresh start's steps, so that the walk closes the
+    # points after one it missed (a four-bar near its toggle: 3 steps from a prediction
+    # 0.02 rad off were one too few, and every later point failed with it); deeper in a gap
+    # the plain steps fail as fast as before
+    retry = (carry.lost >= 1) & (carry.lost <= RETRY_BLOCKS)
+    chk = checked_block(setup, u_blk, g, xs.fresh | retry)
     status = where(chk.ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
     points = PointResults(chk.q, status, chk.steps, chk.residual, chk.cond, chk.branch, None, None)
     # at the reported root itself, not one Newton step before it

@@ -196,10 +196,13 @@ def repaired_part(part: StrokePart, p, repair_rows, size: int | None = None) -> 
     part_rows)`` (the repair stage, compiled for ``size`` designs: they are gathered in
     batches of that many, ``continuation.repaired_rows``); ``part`` itself where every
     sample converged."""
-    passed = all_converged(part.solution.status)
+    status = np.asarray(part.solution.status)
+    passed = all_converged(status)
     if np.all(passed):
         return part
-    return repaired_rows(part, passed, lambda idx: repair_rows(*take_rows((p, part), idx)), size or robust_size(passed.size))
+    # the designs with the fewest failed points first: they share the cheap calls
+    work = np.sum(status != Status.CONVERGED, axis=-1)
+    return repaired_rows(part, passed, lambda idx: repair_rows(*take_rows((p, part), idx)), size or robust_size(passed.size), work)
 
 
 @functools.partial(jit, static_argnums=(0, 1, 2))
