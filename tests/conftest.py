@@ -16,6 +16,12 @@ jax.config.update("jax_enable_x64", True)
 # 2026-11-27, the last with no other thread doing XLA work).  The workers and the command-line
 # and notebook subprocesses share the library's stored executables (jaxmech._compile.stored),
 # out of the home folder; tests of the user's own JAX cache switch it on in a process of their own.
+# ``jaxmech``'s command line switches JAX's cache on for its own process, and the in-process
+# command-line tests run it inside a worker: that left the cache on for every later test of
+# the worker (the CI runs of 8672e96 crashed a worker in put_executable_and_time, in a test
+# that never asked for the cache).  Switched off here for the workers' whole life; the
+# subprocesses that test the cache start with JAX's defaults.
+jax.config.update("jax_enable_compilation_cache", False)
 os.environ.setdefault("JAXMECH_COMPILE_CACHE", os.path.join(tempfile.gettempdir(), "jaxmech-test-store"))
 
 # The worked studies live in examples/ at the repository root (not in the package): make
