@@ -64,6 +64,9 @@ from .solver.status import status_counts as status_counts
 from .solver.status import status_message as status_message
 
 from ._compile.cache import enable_compile_cache as enable_compile_cache
+from ._compile.xla import warn_if_wrong_jaxlib as _warn_if_wrong_jaxlib
+
+_warn_if_wrong_jaxlib()
 
 
 #: Names whose modules load on first use (``jaxmech.linkage``: 15 ms of the import).

@@ -22,6 +22,11 @@ jax.config.update("jax_enable_x64", True)
 # that never asked for the cache).  Switched off here for the workers' whole life; the
 # subprocesses that test the cache start with JAX's defaults.
 jax.config.update("jax_enable_compilation_cache", False)
+# CPU programs run synchronously in the workers: with jaxlib 0.10.x, XLA work on two threads
+# at once crashed or hung (a worker segfaulted loading a stored program in the suite run of
+# 2026-11-28 with an unnamed native thread beside it; benchmarks/flap_torque.py's executables
+# hung on futexes with asynchronous dispatch).  Set before the CPU client exists.
+jax.config.update("jax_cpu_enable_async_dispatch", False)
 os.environ.setdefault("JAXMECH_COMPILE_CACHE", os.path.join(tempfile.gettempdir(), "jaxmech-test-store"))
 
 # The worked studies live in examples/ at the repository root (not in the package): make

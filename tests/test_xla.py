@@ -1,6 +1,7 @@
 """The CPU fusion workaround (jaxmech._compile.xla.unfused) does what it is there for: fewer sine
 evaluations in the compiled residual-and-Jacobian program, the same values."""
 
+import warnings
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -131,3 +132,26 @@ def test_a_cpu_compiler_that_refuses_the_options_compiles_with_its_defaults(tmp_
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split("\n")[-2] == "False {'CONVERGED': 37} {'CONVERGED': 37}", out.stdout
+
+
+def test_the_installed_jax_sums_a_vmapped_product_right():
+    """jaxlib 0.10.2 (excluded by pyproject.toml) summed a vmapped 3x3 matrix-vector product
+    wrong under jit on the CPU from 16,385 rows (jax-ml/jax#39103, 0.8% off in float64): the
+    shape of every batched residual here.  Row ``i`` is ``(i, 0, 0)``: the sum is ``i**2``."""
+    n = 16_385
+    i = jnp.arange(n, dtype=jnp.float64)
+    x = jnp.stack((i, jnp.zeros_like(i), jnp.zeros_like(i)), axis=1)
+    f = jax.jit(lambda x: jax.vmap(lambda row: jnp.sum((jnp.eye(3) @ row) ** 2))(x))
+    np.testing.assert_array_equal(np.asarray(f(x)), np.arange(n, dtype=np.float64) ** 2)
+
+
+def test_a_jaxlib_that_computes_wrong_values_is_warned_at_import(monkeypatch):
+    from importlib import metadata
+
+    monkeypatch.setattr(metadata, "version", lambda name: "0.10.2")
+    with pytest.warns(RuntimeWarning, match=r"jaxlib 0.10.2 computes wrong values .*jax-ml/jax#39103.*pip install 'jax!=0.10.2'"):
+        xla.warn_if_wrong_jaxlib()
+    monkeypatch.setattr(metadata, "version", lambda name: "0.10.1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        xla.warn_if_wrong_jaxlib()

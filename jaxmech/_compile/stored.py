@@ -65,6 +65,7 @@ import jaxlib
 from jax.experimental.serialize_executable import deserialize_and_load, serialize
 
 from .cache import executables_dir
+from .quiet import quiet_loads
 
 __all__ = ["cached_call", "cached_chain", "calls_lapack", "store_dir", "store_stats", "static_token",
            "wait_for_stores"]
@@ -199,7 +200,8 @@ def _load(path: Path):
     if hashlib.sha256(payload).digest() != digest:  # truncated or damaged: never loaded
         return None
     try:
-        return deserialize_and_load(*pickle.loads(zlib.decompress(payload)))
+        with quiet_loads():  # jaxlib 0.10.1's loader logs a spurious machine mismatch
+            return deserialize_and_load(*pickle.loads(zlib.decompress(payload)))
     except Exception:  # from another version or machine after all: compile it anew
         return None
 

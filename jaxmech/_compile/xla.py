@@ -144,3 +144,25 @@ def unfused(v):
     # by XLA, and the values are fused again (tests/test_xla.py counts the sines)
     eye = jnp.eye(v.shape[0], dtype=v.dtype)
     return jnp.tensordot(eye, v, axes=1, precision=jax.lax.Precision.HIGHEST)
+
+
+#: jaxlib releases known to compute wrong values on the CPU, with the report that shows it.
+#: ``pyproject.toml`` excludes them; an environment that has one anyway is warned at import.
+WRONG_JAXLIB = {"0.10.2": "vmapped reductions miscompiled on the CPU, jax-ml/jax#39103"}
+
+
+def warn_if_wrong_jaxlib() -> None:
+    """A ``RuntimeWarning`` when the installed jaxlib is one of ``WRONG_JAXLIB``."""
+    import warnings
+    from importlib import metadata
+
+    try:
+        version = metadata.version("jaxlib")
+    except metadata.PackageNotFoundError:
+        return
+    if version in WRONG_JAXLIB:
+        warnings.warn(
+            f"jaxlib {version} computes wrong values ({WRONG_JAXLIB[version]}); install another: "
+            f"pip install 'jax!={version}' 'jaxlib!={version}'",
+            RuntimeWarning, stacklevel=3,
+        )  # fmt: skip

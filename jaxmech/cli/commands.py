@@ -440,7 +440,12 @@ def _main(argv) -> int:
         args.grid_values = values.parse_grid(getattr(args, "grid", None))
         _check_destination(args)
         _setup_jax()
-        return _VERBS[args.verb](args)
+        from .._compile.quiet import quiet_loads
+
+        # the command's programs come from JAX's cache and the library's store: jaxlib 0.10.1
+        # logs a spurious machine mismatch for each it loads (jaxmech._compile.quiet)
+        with quiet_loads():
+            return _VERBS[args.verb](args)
     except UsageError as e:
         print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2

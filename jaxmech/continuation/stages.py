@@ -114,15 +114,6 @@ class BlockInput(NamedTuple):
 RETRY_BLOCKS = 2
 
 
-# --------------------------------------------------------------------------- mapping helpers
-def per_block(setup: StrokeSetup, fn, u_blk, *args):
-    """``fn(u, p, b0, *per-point args)`` over designs (outer) and the block's points
-    (inner), ``(D, k, ...)`` in and out: what depends on the parameters alone is computed
-    once per design (the checked step: 8% of the steady-state stroke, measured)."""
-    inner = lambda u_d, p_, b_, *pts: jax.vmap(lambda u_, *pp: fn(u_, p_, b_, *pp))(u_d, *pts)  # noqa: E731
-    return jax.vmap(inner, (setup.ax, 0, 0) + (0,) * len(args))(u_blk, setup.p, setup.b0, *args)
-
-
 # --------------------------------------------------------------------------- stages
 def block_guesses(setup: StrokeSetup, carry: StrokeCarry, u_blk):
     """Each design's block of guesses ``(D, k, m)`` from its anchor by the guarded predictor
@@ -136,7 +127,9 @@ def checked_block(setup: StrokeSetup, u_blk, guesses, fresh=False):
     """``point.checked_step`` for every point: a ``CheckedStep`` of ``(D, k, ...)``:
     up to ``CHECKED_STEPS`` Newton steps a point, or ``FRESH_STEPS`` where the guess has no
     series (``fresh``: the block that starts the walk, or per design ``(D,)``; may be
-    traced)."""
+    traced).  Mapped over designs (outer) and the block's points (inner): what depends on
+    the parameters alone is computed once per design (8% of the steady-state stroke,
+    measured)."""
     most = jnp.broadcast_to(jnp.where(fresh, FRESH_STEPS, CHECKED_STEPS), guesses.shape[:1])
     step = lambda u, p_, b_, most_, g_: checked_step(setup.mech, setup.options, u, p_, g_, b_, most_)  # noqa: E731
     inner = lambda u_d, p_, b_, most_, g_d: jax.vmap(lambda u_, g_: step(u_, p_, b_, most_, g_))(u_d, g_d)  # noqa: E731
