@@ -17,10 +17,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
 
 import jax
 
 __all__ = ["quiet_loads"]
+
+_LOCK = threading.Lock()
+_DEPTH = [0]  # holds open now, all threads
 
 #: absl's levels: 0 INFO, 1 WARNING, 2 ERROR, 3 FATAL (jax._src.logging_config's map).
 _LEVELS = {"CRITICAL": 3, "FATAL": 3, "ERROR": 2, "WARN": 1, "WARNING": 1, "INFO": 0, "DEBUG": 0}
@@ -53,8 +57,14 @@ def quiet_loads():
     if set_level is None:
         yield
         return
-    set_level(3)
+    # nested (a store load inside the command's own hold): only the outermost one restores
+    with _LOCK:
+        _DEPTH[0] += 1
+        set_level(3)
     try:
         yield
     finally:
-        set_level(_level_now())
+        with _LOCK:
+            _DEPTH[0] -= 1
+            if _DEPTH[0] == 0:
+                set_level(_level_now())
