@@ -19,7 +19,6 @@ from .actuators import SMAWire as SMAWire
 from .dynamics import Actuator as Actuator
 from .dynamics import Axial as Axial
 from .dynamics import Body as Body
-from .dynamics import DynStatus as DynStatus
 from .dynamics import Equilibrium as Equilibrium
 from .dynamics import Gravity as Gravity
 from .dynamics import InverseDynamics as InverseDynamics
@@ -31,7 +30,6 @@ from .dynamics import Revolute as Revolute
 from .dynamics import Slot as Slot
 from .dynamics import Potential as Potential
 from .dynamics import Trajectory as Trajectory
-from .dynamics import dyn_status_message as dyn_status_message
 from .dynamics import equilibrium as equilibrium
 from .dynamics import forward_dynamics as forward_dynamics
 from .dynamics import generalized_forces as generalized_forces
@@ -69,6 +67,19 @@ from ._compile.xla import warn_if_wrong_jaxlib as _warn_if_wrong_jaxlib
 _warn_if_wrong_jaxlib()
 
 
+def _dyn_status():
+    from .solver.status import DYN_STATUS
+
+    return "Status (one family of result codes; compare with names, not numbers)", DYN_STATUS
+
+
+#: Deprecated names -> ``() -> (the new name, its value)``: they work one release more, with a warning.
+_RENAMED = {
+    "implicit_root": lambda: ("implicit_positions", implicit_positions),
+    "DynStatus": _dyn_status,
+    "dyn_status_message": lambda: ("status_message", status_message),
+}
+
 #: Names whose modules load on first use (``jaxmech.linkage``: 15 ms of the import).
 _LAZY = {"Linkage": "linkage", "load_linkage": "linkage", "drawing_from_lengths": "linkage"}
 
@@ -84,11 +95,12 @@ def __getattr__(name):
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
         globals()[name] = value
         return value
-    if name == "implicit_root":
+    if name in _RENAMED:
         import warnings
 
-        warnings.warn("jaxmech.implicit_root is deprecated: use jaxmech.implicit_positions", DeprecationWarning, stacklevel=2)
-        return implicit_positions
+        new, value = _RENAMED[name]()
+        warnings.warn(f"jaxmech.{name} is deprecated: use jaxmech.{new}", DeprecationWarning, stacklevel=2)
+        return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -107,7 +119,7 @@ __all__ = [
     "input_derivatives", "time_derivatives",
     # models and dynamics
     "Model", "Body", "Gravity", "PointForce", "Moment", "Axial", "Potential", "Revolute", "Prismatic", "Slot",
-    "Actuator", "InverseDynamics", "Equilibrium", "Trajectory", "DynStatus", "dyn_status_message",
+    "Actuator", "InverseDynamics", "Equilibrium", "Trajectory",
     "inverse_dynamics", "inverse_dynamics_at", "statics", "equilibrium", "forward_dynamics",
     "mass_matrix", "generalized_forces", "kinetic_energy", "potential_energy",
     # actuators

@@ -10,6 +10,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from jaxmech import Mechanism, cis  # noqa: E402
+import jaxmech as jm  # noqa: E402
 from jaxmech import dynamics as D  # noqa: E402
 from jaxmech.actuators import DCMotor, HydraulicCylinder, LinearSpring, ScrewJack, SMAWire, resolve  # noqa: E402
 
@@ -116,7 +117,7 @@ def test_dc_motor_steady_state_matches_voltage_formula():
     motor = DCMotor("R_a", "K_m", inductance="L_a")
     # electrical time constant L/R = 0.5 ms against a 5 ms step: stiff, Radau IIA damps it
     tr = D.forward_dynamics(model, p, 0.0, 0.0, jnp.array([0.2, 1.2]), h=5e-3, steps=300, motor=motor, voltage="V")
-    assert int(tr.status) == D.DynStatus.OK
+    assert int(tr.status) == jm.Status.CONVERGED
     w, i = float(tr.u_dot[-1, 0]), float(tr.current[-1, 0])
     v_formula = p["R_a"] * p["cv"] * w / p["K_m"] + p["K_m"] * w
     assert abs(v_formula - p["V"]) <= RTOL_STEADY * p["V"]
@@ -149,7 +150,7 @@ def test_oil_cylinder_closed_chamber_against_its_closed_form():
     A = np.pi * p["D"] ** 2 / 4
     w = np.sqrt(p["beta"] * A**2 / p["V0"] / p["m"])  # 88.6 rad/s: 126 steps per period
     tr = D.forward_dynamics(model, p, 0.0, 0.0, (), h=0.05 / w, steps=190, actuators={"x": cylinder})
-    assert int(tr.status) == D.DynStatus.OK and tr.states.shape == (191, 1) and tr.current.shape == (191, 0)
+    assert int(tr.status) == jm.Status.CONVERGED and tr.states.shape == (191, 1) and tr.current.shape == (191, 0)
     x, v, P = (np.asarray(a) for a in (tr.u[:, 0], tr.u_dot[:, 0], tr.states[:, 0]))
     assert np.ptp(x) > 1e-3  # it oscillates (amplitude ~2 mm)
     V = p["V0"] + A * x

@@ -265,7 +265,7 @@ def test_the_example_file(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "status not_converged at t = 0 s" in printed and "stopped early:" in printed and "smaller h" in printed, printed
     stopped = read_csv(tmp_path / "fourbar_motor_simulate.csv")
-    assert stopped["status[-]"][0] == 0 and np.all(stopped["status[-]"][1:] == 3) and np.all(np.isnan(stopped["theta_crank[rad]"][1:]))
+    assert stopped["status[-]"][0] == 0 and np.all(stopped["status[-]"][1:] == jm.Status.NOT_CONVERGED) and np.all(np.isnan(stopped["theta_crank[rad]"][1:]))
 
 
 # --------------------------------------------------------------------------- mistakes

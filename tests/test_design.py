@@ -11,7 +11,8 @@ import optax  # noqa: E402
 import pytest  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
-from jaxmech.design import StopReason, fit, peak, scene_figure, sensitivities  # noqa: E402
+from jaxmech import Status  # noqa: E402
+from jaxmech.design import fit, peak, scene_figure, sensitivities  # noqa: E402
 from jaxmech.scenes import run_scene  # noqa: E402
 from jaxmech.scenes.classic import FOURBAR, SLIDER_CRANK  # noqa: E402
 
@@ -155,10 +156,10 @@ def test_fit_identifies_fourbar_lengths_within_noise():
     starts = {"b": [3.3, 2.8, 3.2, 2.9], "c": [1.0, 2.2, 2.8, 3.4]}
     res = fit(objective, starts, bounds={"b": (2.0, 4.0), "c": (0.5, 4.0)}, optimizer=optax.lbfgs(), steps=100)
     report = res.report()
-    assert res.reason[0] == StopReason.INFEASIBLE and res.steps[0] == 0
+    assert res.reason[0] == Status.INFEASIBLE and res.steps[0] == 0
     assert "infeasible at the start" in report
     assert f"start {res.best} won" in report and "<- winner" in report
-    assert res.reason[res.best] == StopReason.CONVERGED
+    assert res.reason[res.best] == Status.CONVERGED
 
     # Independent truth 1: scipy's least squares on run_scene gives the same minimiser.
     def residual(x):
@@ -190,7 +191,7 @@ def test_fit_reasons_on_a_cheap_objective():
         objective, {"x": [1.0, -1.0, 3.0]}, optimizer=optax.adam(0.05), steps=30,
         penalty=lambda p: p["x"] - 1.5, penalty_weight=1e4,
     )
-    assert res.reason[1] == StopReason.INFEASIBLE  # log(-1) is NaN at the start
-    assert res.reason[0] == StopReason.MAX_STEPS and res.steps[0] == 30
+    assert res.reason[1] == Status.INFEASIBLE  # log(-1) is NaN at the start
+    assert res.reason[0] == Status.MAX_STEPS and res.steps[0] == 30
     assert res.best in (0, 2) and "won" in res.report()
     assert res.history.shape == (31, 3)

@@ -14,6 +14,7 @@ from scipy.optimize import brentq  # noqa: E402
 
 from helpers import central_diff, fourbar_closed  # noqa: E402
 from jaxmech import Mechanism, SmoothStart, cis  # noqa: E402
+import jaxmech as jm  # noqa: E402
 from jaxmech import dynamics as D  # noqa: E402
 from jaxmech.actuators import LinearSpring, SMAWire  # noqa: E402
 
@@ -368,16 +369,16 @@ def _flap_batch():
 def test_equilibrium_matches_brentq(case):
     eps, xi = FLAP_CASES[case]
     sol = _flap_batch()
-    assert int(sol.status[case]) == D.DynStatus.OK
+    assert int(sol.status[case]) == jm.Status.CONVERGED
     assert abs(float(sol.u[case, 0]) - _brentq_equilibrium({**FLAP_PARAMS, "eps": eps, "xi": xi})) <= TOL_EQ
     assert bool(sol.stable[case])
 
 
 def test_no_equilibrium_in_range_is_reported():
     sol = _flap_batch()
-    assert int(sol.status[-1]) == D.DynStatus.NO_EQUILIBRIUM
+    assert int(sol.status[-1]) == jm.Status.NO_EQUILIBRIUM
     assert np.isnan(sol.u[-1, 0]) and np.isnan(sol.q[-1, 0])
-    assert "no equilibrium" in D.dyn_status_message(sol.status[-1])
+    assert "no equilibrium" in jm.status_message(sol.status[-1])
 
 
 def _flap_theta(P):
@@ -414,7 +415,7 @@ def _energy(model, tr, P):
 def test_energy_is_conserved_without_loads():
     # no applied loads but gravity (a potential): T + V is conserved; about one crank turn
     tr = D.forward_dynamics(FB_MODEL, FB_FREE, 0.0, 6.0, FB_GUESS, h=0.005, steps=300)
-    assert int(tr.status) == D.DynStatus.OK
+    assert int(tr.status) == jm.Status.CONVERGED
     assert float(tr.u[-1, 0]) > 2 * np.pi
     E = _energy(FB_MODEL, tr, FB_FREE)
     assert np.max(np.abs(E / E[0] - 1.0)) < 1e-8
@@ -432,7 +433,7 @@ def test_inverse_dynamics_torque_reproduces_motion():
         return D.generalized_forces(FB_MODEL, qd, uu, uud, uudd, p, t)[0]
 
     tr = D.forward_dynamics(FB_MODEL, P, 0.3, 0.0, FB_GUESS, h=0.005, steps=300, load=torque)
-    assert int(tr.status) == D.DynStatus.OK
+    assert int(tr.status) == jm.Status.CONVERGED
     want = jax.vmap(drive)(tr.t)
     assert np.max(np.abs(np.asarray(tr.u[:, 0] - want))) < 1e-6
 
@@ -445,7 +446,7 @@ def _drive_derivs(drive, t):
 
 def test_stroke_end_and_singular_position_stop_with_status():
     tr = D.forward_dynamics(FB_MODEL, FB_FREE, 0.0, 6.0, FB_GUESS, h=0.005, steps=300, stroke=(-1.0, 2.0))
-    assert int(tr.status) == D.DynStatus.STROKE_END
+    assert int(tr.status) == jm.Status.STROKE_END
     last = int(np.sum(np.isfinite(np.asarray(tr.u[:, 0])))) - 1
     assert float(tr.u[last, 0]) > 2.0 and float(tr.u[last - 1, 0]) <= 2.0
     assert np.all(np.isnan(np.asarray(tr.u[last + 1:, 0])))
@@ -457,7 +458,7 @@ def test_stroke_end_and_singular_position_stop_with_status():
     lim = np.arccos((2.4**2 + 3.5**2 - 5.5**2) / (2 * 2.4 * 3.5))
     g = jnp.array(fourbar_closed(0.0, 2.4, 3.0, 2.5, 3.5))
     tr = D.forward_dynamics(FB_MODEL, Pt, 0.0, 6.0, g, h=0.005, steps=300)
-    assert int(tr.status) == D.DynStatus.POSITION
+    assert int(tr.status) == jm.Status.POSITION
     ok = np.isfinite(np.asarray(tr.u[:, 0]))
     n = int(np.sum(ok))
     assert np.all(ok[:n]) and not np.any(ok[n:]) and n < 301

@@ -106,7 +106,7 @@ def test_fourbar_torsion_spring_equilibrium_against_brentq():
     h = 1e-4
     assert fourbar_energy(truth - h) > fourbar_energy(truth) < fourbar_energy(truth + h)
     eq = jm.equilibrium(lk.model, lk.params, (lo, hi), lk.guess)
-    assert int(eq.status[()]) == jm.DynStatus.OK and bool(eq.stable)
+    assert int(eq.status[()]) == jm.Status.CONVERGED and bool(eq.stable)
     assert abs(float(eq.u[0]) - truth) <= 1e-10
     # statics: the holding torque is dV/dtheta2 along the range, zero at the equilibrium
     us = np.radians(np.linspace(30.0, 130.0, 11))

@@ -10,7 +10,8 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxmech.design.nlp import Status, cholesky_small, second_order  # noqa: E402
+from jaxmech import Status  # noqa: E402
+from jaxmech.design.nlp import cholesky_small, second_order  # noqa: E402
 from jaxmech.design.qp import solve_qp  # noqa: E402
 from jaxmech.design.sqp import queue, sqp  # noqa: E402
 

@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from jaxmech.design.constrained import Stated, minimize  # noqa: E402
-from jaxmech.design.nlp import Status  # noqa: E402
+from jaxmech import Status  # noqa: E402
 from jaxmech.design.second_order import minimize_second_order, state_evaluator  # noqa: E402
 from jaxmech.design.stroke_problem import StrokeProblem, stroke_evaluator, stroke_sizes, stroke_state  # noqa: E402
 from jaxmech.scenes.classic import fourbar_mechanism  # noqa: E402

@@ -47,7 +47,7 @@ def _overrides(lk, sim, raw: dict) -> dict[str, float]:
 def summary(lk, sim, tr, cols: dict) -> str:
     """A few lines: the run (steps, step, final time, status), the input and its rate at
     the start and the end (angles in degrees), the motor's peak current, why it stopped early."""
-    from ..dynamics.status import DynStatus
+    from ..solver.status import Status
     from ..units import for_reading
 
     status = int(tr.status)
@@ -57,7 +57,7 @@ def summary(lk, sim, tr, cols: dict) -> str:
     drive = {"none": "free motion", "motor": "driven by the motor", "torque": "driven by a constant torque"}[sim.drive]
     t_last = float(cols["t[s]"][-1])
     lines = [f"{lk.name}: forward dynamics over {t_last:.6g} s ({sim.steps} steps of {sim.step:.6g} s), {drive}; "
-             f"status {DynStatus(status).name.lower()}" + (f" at t = {t_end:.6g} s" if status != 0 else "")]
+             f"status {'ok' if status == Status.CONVERGED else Status(status).name.lower()}" + (f" at t = {t_end:.6g} s" if status != 0 else "")]
     name = lk.mechanism.inputs[0]
     for key in (k for k in cols if k.startswith(f"{name}[") or k.startswith(f"{name}_dot[")):
         unit = key[key.index("[") + 1:-1]

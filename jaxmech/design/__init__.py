@@ -38,7 +38,6 @@ from .figures import SceneFigure as SceneFigure
 from .figures import peak as peak
 from .figures import scene_figure as scene_figure
 from .fitting import FitResult as FitResult
-from .fitting import StopReason as StopReason
 from .fitting import fit as fit
 from .sensitivities import Sensitivities as Sensitivities
 from .sensitivities import sensitivities as sensitivities
@@ -60,7 +59,6 @@ __all__ = [
     "FitResult",
     "SceneFigure",
     "Sensitivities",
-    "StopReason",
     "fit",
     "peak",
     "scene_figure",
@@ -79,3 +77,12 @@ __all__ = [
     "path_error",
     "synthesize_path",
 ]
+
+
+def __getattr__(name):
+    """``StopReason`` (deprecated: ``jaxmech.Status``)."""
+    if name == "StopReason":
+        from ..solver import status as _status
+
+        return _status.deprecated(__name__, name, "jaxmech.Status", _status.STOP_REASON)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,6 @@ why each of the others stopped."""
 from __future__ import annotations
 
 import dataclasses
-import enum
 import functools
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
@@ -14,46 +13,21 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..solver.status import Status, status_message
 from .._compile.xla import jit
 from .figures import as_batch, figure_value
 
-__all__ = ["FitResult", "StopReason", "fit"]
+__all__ = ["FitResult", "fit"]
 
 
 # =========================================================================== fitting
-class StopReason(enum.IntEnum):
-    """Why one start of a multi-start fit stopped.
-
-    - ``CONVERGED``: a step changed the objective by at most ``tol`` (relative) and every
-      parameter by at most ``xtol`` (relative).
-    - ``MAX_STEPS``: the step budget ran out while still moving.
-    - ``INFEASIBLE``: the objective was not finite or the design failed to solve (a
-      status other than converged); the start stopped at its last feasible design.
-    - ``DIVERGED``: a parameter or the gradient became non-finite, or the objective grew
-      beyond ``diverge`` times its starting magnitude.
-    """
-
-    CONVERGED = 0
-    MAX_STEPS = 1
-    INFEASIBLE = 2
-    DIVERGED = 3
-
-
-_STOP_MESSAGES = {
-    StopReason.CONVERGED: "converged: objective and parameter changes below tolerance",
-    StopReason.MAX_STEPS: "ran out of steps while still improving",
-    StopReason.INFEASIBLE: "infeasible: objective not finite or the design did not solve; kept the last feasible design",
-    StopReason.DIVERGED: "diverged: non-finite parameters or gradient, or the objective blew up",
-}
-
-
 @dataclasses.dataclass(frozen=True)
 class FitResult:
     """Result of a multi-start fit.
 
     - `params`: ``{name: (S,)}`` each start's final (last feasible) parameters.
     - `value`: ``(S,)`` objective there (``inf`` where even the start was infeasible).
-    - `reason`: ``(S,)`` ``StopReason`` codes; `steps`: ``(S,)`` steps taken.
+    - `reason`: ``(S,)`` ``Status`` codes; `steps`: ``(S,)`` steps taken.
     - `history`: ``(steps + 1, S)`` objective after each step (once a start has stopped
       its last value is repeated; ``inf`` for a start infeasible from the beginning).
     - `best`: index of the winning start (lowest objective among those that neither
@@ -78,13 +52,16 @@ class FitResult:
 
     def message(self, i: int) -> str:
         """Why start ``i`` stopped, in words."""
-        r = StopReason(int(self.reason[i]))
-        msg = _STOP_MESSAGES[r]
-        if r == StopReason.INFEASIBLE and self.steps[i] == 0:
-            msg = "infeasible at the start: objective not finite or the design did not solve"
-        elif r == StopReason.CONVERGED:
-            msg += f" (tol={self.tol:g}, xtol={self.xtol:g})"
-        return msg
+        r = Status(int(self.reason[i]))
+        if r == Status.INFEASIBLE:  # the fit's reading of the code
+            if self.steps[i] == 0:
+                return "infeasible at the start: objective not finite or the design did not solve"
+            return "infeasible: objective not finite or the design did not solve; kept the last feasible design"
+        if r == Status.CONVERGED:
+            return f"converged: objective and parameter changes below tolerance (tol={self.tol:g}, xtol={self.xtol:g})"
+        if r == Status.MAX_STEPS:
+            return "ran out of steps while still improving"
+        return status_message(r)
 
     def report(self) -> str:
         """Which start won, and why each of the others stopped."""
@@ -173,7 +150,7 @@ def fit(
     )
     value = np.asarray(value)
     reason = np.asarray(reason)
-    usable = np.isfinite(value) & (reason != StopReason.DIVERGED)
+    usable = np.isfinite(value) & (reason != Status.DIVERGED)
     best = int(np.argmin(np.where(usable, value, np.inf))) if np.any(usable) else -1
     return FitResult(
         params={k: np.asarray(v) for k, v in params.items()},
@@ -211,7 +188,7 @@ class _FitCarry(NamedTuple):
 
 class FitLoop(NamedTuple):
     """What the compiled fit loop returns (``_fit_loop``), a row per start: the final
-    designs `params`, objective `value`, ``StopReason`` `reason`, steps taken `nsteps`, and
+    designs `params`, objective `value`, ``Status`` `reason`, steps taken `nsteps`, and
     the objective's `history` ``(steps + 1, starts)`` (rows after a start ended repeat its
     final value)."""
 
@@ -249,7 +226,7 @@ def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi
     def start(p):
         (v, ok), g = value_and_grad(p)
         state = opt.init(p)
-        reason = jnp.where(ok, StopReason.MAX_STEPS, StopReason.INFEASIBLE).astype(jnp.int32)
+        reason = jnp.where(ok, Status.MAX_STEPS, Status.INFEASIBLE).astype(jnp.int32)
         return p, state, v, g, ok, reason, jnp.abs(v)
 
     def step(p, state, v, g, active, reason, v0):
@@ -268,8 +245,8 @@ def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi
         p, state, v, g = sel(p_new, p), sel(new_state, state), sel(v_new, v), sel(g_new, g)
         reason = jnp.where(
             active,
-            jnp.where(diverged, StopReason.DIVERGED, jnp.where(infeasible, StopReason.INFEASIBLE,
-                      jnp.where(converged, StopReason.CONVERGED, StopReason.MAX_STEPS))),
+            jnp.where(diverged, Status.DIVERGED, jnp.where(infeasible, Status.INFEASIBLE,
+                      jnp.where(converged, Status.CONVERGED, Status.MAX_STEPS))),
             reason,
         ).astype(jnp.int32)
         return p, state, v, g, active & ~(diverged | infeasible | converged), reason
@@ -295,3 +272,13 @@ def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi
     rows = jnp.arange(steps + 1)[:, None]
     history = jnp.where(rows <= k, history, v[None, :])
     return FitLoop(p, v, reason, nsteps, history)
+
+
+def __getattr__(name):
+    """``StopReason`` was ``fit``'s own result codes: one family now (``jaxmech.Status``;
+    deprecated, its old member names give the new members)."""
+    from ..solver import status as _status
+
+    if name == "StopReason":
+        return _status.deprecated(__name__, name, "jaxmech.Status", _status.STOP_REASON)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,5 +1,5 @@
 """What the constrained optimiser of the design layer works on: a nonlinear program's
-evaluation with exact second derivatives, its statuses, its KKT residual, and a Cholesky
+evaluation with exact second derivatives, its KKT residual, and a Cholesky
 factorisation written in JAX.
 
 The problem, in scaled variables ``x``::
@@ -15,33 +15,13 @@ second-order adjoint; ``design.sqp`` solves either.
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Status", "STATUS_MESSAGES", "Evaluation", "RowDerivatives", "second_order", "weighted_derivatives", "cholesky_small", "kkt_error"]
-
-
-class Status(enum.IntEnum):
-    """How a start ended."""
-
-    CONVERGED = 0  #: scaled KKT residual <= tol
-    MAX_ITERATIONS = 1  #: the iteration budget ran out first
-    SMALL_STEP = 2  #: the line search could not find an acceptable step
-    START_NOT_EVALUATED = 3  #: the start cannot be evaluated (does not assemble)
-    NONFINITE = 4  #: a derivative or a step was not finite
-
-
-STATUS_MESSAGES = {
-    Status.CONVERGED: "converged: scaled KKT residual within tolerance",
-    Status.MAX_ITERATIONS: "stopped on the iteration limit before the KKT residual met the tolerance",
-    Status.SMALL_STEP: "the line search found no acceptable step (every shorter or corrected step failed or did not decrease the penalty)",
-    Status.START_NOT_EVALUATED: "the start cannot be evaluated (the design does not assemble there)",
-    Status.NONFINITE: "a derivative or a step was not finite",
-}
+__all__ = ["Evaluation", "RowDerivatives", "second_order", "weighted_derivatives", "cholesky_small", "kkt_error"]
 
 
 class Evaluation(NamedTuple):
@@ -132,3 +112,13 @@ def kkt_error(grad, jac, y, z, s, c, p, mu, s_max):
     primal = jnp.maximum(jnp.max(jnp.abs(h), initial=0.0), jnp.max(jnp.abs(g + s), initial=0.0))
     comp = jnp.max(jnp.abs(s * z - mu), initial=0.0) / s_c
     return jnp.maximum(jnp.maximum(jnp.max(jnp.abs(r_d)) / s_d, primal), comp)
+
+
+def __getattr__(name):
+    """``Status`` here was the SQP's own result codes: one family now (``jaxmech.Status``;
+    deprecated, its old member names give the new members)."""
+    from ..solver import status as _status
+
+    if name == "Status":
+        return _status.deprecated(__name__, name, "jaxmech.Status", _status.SQP_STATUS)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

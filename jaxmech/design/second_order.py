@@ -31,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .constrained import starts_in_box, stated_rows
-from .nlp import STATUS_MESSAGES, Evaluation, Status, weighted_derivatives
+from ..solver.status import Status, status_message
+from .nlp import Evaluation, weighted_derivatives
 from .._compile.xla import jit
 from .sqp import SQPOptions, queue
 from .stroke_problem import StrokeProblem, stroke_evaluator, stroke_sizes
@@ -148,7 +149,11 @@ class SecondOrderResult:
         return {k: float(v[self.best]) for k, v in self.params.items()}
 
     def message(self, i: int) -> str:
-        return STATUS_MESSAGES[Status(int(self.status[i]))]
+        """Why start ``i`` stopped, in words (``status_message``, with the SQP's reading)."""
+        code = Status(int(self.status[i]))
+        detail = {Status.CONVERGED: " (scaled KKT residual within tolerance)",
+                  Status.INFEASIBLE: " (the start cannot be evaluated: the design does not assemble there)"}
+        return status_message(code) + detail.get(code, "")
 
     def report(self, show: int = 12) -> str:
         """The winner, the local optima with how many starts reached each, and why each of
@@ -248,7 +253,7 @@ def _result(st, pulled, sizes: Epigraph, lo, width, names, peak_scale, feas_tol,
     n, n_pk, p, n_le = sizes
     c = np.asarray(st.c)
     status = np.asarray(st.status)
-    ok = np.isfinite(np.asarray(st.f)) & (status != Status.START_NOT_EVALUATED)
+    ok = np.isfinite(np.asarray(st.f)) & (status != Status.INFEASIBLE)
     t = np.asarray(st.x)[:, -1]
     peak = (c[:, p: p + n_pk] + t[:, None]) * peak_scale
     value = np.where(ok, np.max(peak, axis=1, initial=-np.inf), np.inf)

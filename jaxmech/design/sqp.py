@@ -44,7 +44,8 @@ import jax.numpy as jnp
 
 from ..solver.linalg import where
 from ..solver.newton import per_lane
-from .nlp import Evaluation, Status, cholesky_small, kkt_error
+from ..solver.status import Status
+from .nlp import Evaluation, cholesky_small, kkt_error
 from .qp import solve_qp
 
 __all__ = ["SQPOptions", "sqp", "queue", "iteration", "running", "merit"]
@@ -177,7 +178,7 @@ def initial_loop(x0, y0, z0, p: int, m: int) -> SQPLoop:
     zero_i = jnp.zeros((), jnp.int32)
     st = SQPState(k=zero_i, x=x0, y=y0, z=z0, f=nan, c=jnp.full((p + m,), nan), grad=jnp.zeros((n,), dtype),
                   jac=jnp.zeros((p + m, n), dtype), hess=jnp.zeros((n, n), dtype), error=jnp.asarray(jnp.inf, dtype),
-                  nu=jnp.asarray(1.0, dtype), status=jnp.asarray(Status.MAX_ITERATIONS, jnp.int32), done=jnp.asarray(False))
+                  nu=jnp.asarray(1.0, dtype), status=jnp.asarray(Status.MAX_STEPS, jnp.int32), done=jnp.asarray(False))
     return SQPLoop(st=st, phase=zero_i, pulled=zero_i, xt=x0, yt=y0, zt=z0, d=jnp.zeros((n,), dtype), alpha=jnp.ones((), dtype), lm=jnp.zeros((), dtype),
                    soc=zero_i, phi0=nan, dphi=nan, pred=nan, backtracks=zero_i)
 
@@ -254,8 +255,8 @@ def step(lp: SQPLoop, j: _Judged, ev: Evaluation, ref, p: int, o: SQPOptions) ->
     small = ~j.accept & (backtracks >= o.max_backtrack) & (lp.phase == 1)
     give_up = j.start_bad & (lp.pulled >= 20)
     bad = ~(finite & b_ok) & ~converged & (j.accept | use_soc)
-    status = where(converged, Status.CONVERGED, where(give_up, Status.START_NOT_EVALUATED,
-                   where(bad, Status.NONFINITE, where(small, Status.SMALL_STEP, Status.MAX_ITERATIONS))))
+    status = where(converged, Status.CONVERGED, where(give_up, Status.INFEASIBLE,
+                   where(bad, Status.NONFINITE, where(small, Status.SMALL_STEP, Status.MAX_STEPS))))
     done = converged | give_up | bad | small
     cur = cur._replace(nu=nu, status=status.astype(jnp.int32), done=done)
     fresh = j.accept | (lp.phase == 0)

@@ -46,8 +46,6 @@ from .model import PointForce as PointForce
 from .model import Potential as Potential
 from .static_equilibrium import Equilibrium as Equilibrium
 from .static_equilibrium import equilibrium as equilibrium
-from .status import DynStatus as DynStatus
-from .status import dyn_status_message as dyn_status_message
 from .virtual_power import generalized_forces as generalized_forces
 from .virtual_power import kinetic_energy as kinetic_energy
 from .virtual_power import mass_matrix as mass_matrix
@@ -61,8 +59,6 @@ __all__ = [
     "Axial",
     "Potential",
     "Model",
-    "DynStatus",
-    "dyn_status_message",
     "generalized_forces",
     "mass_matrix",
     "kinetic_energy",
@@ -87,3 +83,15 @@ __all__ = [
     "rhs",
     "METHODS",
 ]
+
+
+def __getattr__(name):
+    """The result codes before they were one family: ``DynStatus`` is ``jaxmech.Status``'s
+    names (deprecated), ``dyn_status_message`` is ``jaxmech.status_message``."""
+    from ..solver import status as _status
+
+    if name == "DynStatus":
+        return _status.deprecated(__name__, name, "jaxmech.Status", _status.DYN_STATUS)
+    if name == "dyn_status_message":
+        return _status.deprecated(__name__, name, "jaxmech.status_message", _status.status_message)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

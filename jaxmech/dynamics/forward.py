@@ -28,7 +28,6 @@ from .friction import friction_parameters
 from .forward_steps import (METHODS, Chunk, Integrator, Run, StepCarry, integrate, integrate_chunk, newton_tolerance, rhs,
                             stage_residual, coordinate_rates)
 from .model import Model, mechanism_params, prepare_params
-from .status import DynStatus
 from .._compile.xla import jit
 
 __all__ = ["METHODS", "CHUNK", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "Run",
@@ -42,7 +41,7 @@ class Trajectory:
 
     - `t` (s), `u` ``(N+1, dof)`` (rad or m), `u_dot` (rad/s or m/s), `q` ``(N+1, m)``.
     - `current`: motor current ``(N+1, 1)`` (A) with an inductive motor, else ``(N+1, 0)``.
-    - `status`: ``DynStatus`` of the run (scalar); `t_stop`: time of the last valid state.
+    - `status`: ``Status`` of the run (scalar); `t_stop`: time of the last valid state.
       Rows after a stop are NaN; with ``STROKE_END`` the first state past the end is kept.
       ``message()`` says why it stopped, with the fix.
     - `newton`: simplified-Newton iterations of each step ``(N,)`` (0 after a stop).
@@ -227,7 +226,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
 
     **Returns** a ``Trajectory`` (``Trajectory.dynamics`` adds the effort and every joint's
     reaction).  A run stops at a singular or unassemblable position, a failed step or the
-    stroke's end with its ``DynStatus`` (later rows NaN); ``Trajectory.message()`` names
+    stroke's end with its ``Status`` (later rows NaN); ``Trajectory.message()`` names
     the cause (the step against ``close_iters`` where the loop closes one step on).
     """
     mech = model.mechanism
@@ -248,7 +247,7 @@ def forward_dynamics(model: Model, p: Mapping, u0, u_dot0, guess, *, h, steps: i
     sol = solve(mech, {k: u0.astype(dtype)[i] for i, k in enumerate(mech.inputs)}, mechanism_params(model, pj),
                 guess.astype(dtype), options=options)
     t0, h, ok = jnp.asarray(t0, dtype), jnp.asarray(h, dtype), sol.status == Status.CONVERGED
-    init = StepCarry(y0, sol.q, jnp.where(ok, DynStatus.OK, DynStatus.POSITION).astype(jnp.int32), t0, ok)
+    init = StepCarry(y0, sol.q, jnp.where(ok, Status.CONVERGED, Status.POSITION).astype(jnp.int32), t0, ok)
     run = run_chunks(integ, pj, t0, h, int(steps), init, stroke_bounds(stroke, mech.dof, dtype))
     closable, cond = stop_diagnosis(model, run.carry, h, pj, options)
     n_motor = acts[0][1].n_states if motor is not None else 0

@@ -16,7 +16,7 @@ c w``, one unknown per joint, solved by ``friction.solve_friction_loads``: Newto
 from ``s = 0`` (the frictionless solution), attached to the state and the parameters by
 the implicit function theorem (derivatives in every parameter, none through the
 iterations).  Its status: ``converged`` (False: the accelerations are NaN, and the run
-stops with ``DynStatus.FRICTION``).
+stops with ``Status.FRICTION``).
 
 **The sign** is ``friction.friction_signs``' ``tanh(w / (width W))`` with ``W`` each joint's
 speed scale given to the run (a forward run does not know its joints' largest speeds

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..solver.inputs import as_coords, as_inputs
 from .friction import friction_speeds
-from .status import DynStatus, dyn_status_message
+from ..solver.status import Status, status_message
 
 __all__ = ["checked_arguments", "run_actuators", "friction_speeds", "initial_state", "stroke_bounds", "StopCause",
            "stop_message"]
@@ -96,7 +96,7 @@ def stroke_bounds(stroke, dof: int, dtype):
 class StopCause:
     """What a run's message needs to name a stop's cause (plain numbers, read after the run).
 
-    - `status`: the run's ``DynStatus``; `t_stop`: time of its last valid state (s).
+    - `status`: the run's ``Status``; `t_stop`: time of its last valid state (s).
     - `h`: the step (s); `close_iters`: the loop closure's Newton steps per stage;
       `newton_max`: the stage Newton's budget.
     - `closable`: whether the loop closes (a full position solve, converged and below the
@@ -121,18 +121,18 @@ def stop_message(cause: StopCause) -> str:
     be closed one step on (the position solve fails there or its Jacobian's condition is
     past the limit); where it can, the step outran the closure's fixed Newton budget: the
     message names `h` and `close_iters` and says to lower one or raise the other."""
-    code = DynStatus(int(cause.status))
+    code = Status(int(cause.status))
     at = f"at t = {cause.t_stop:.6g} s"
-    if code == DynStatus.POSITION and cause.closable:
+    if code == Status.POSITION and cause.closable:
         return (f"the loop closure did not converge in close_iters={cause.close_iters} Newton steps within the step "
                 f"h={cause.h:.3g} s {at}, although the position one step on is well conditioned (condition number "
                 f"{cause.cond:.3g}): the step is too large for the closure's budget; use a smaller h or a larger close_iters")
-    if code == DynStatus.POSITION:
-        return (f"{dyn_status_message(code)} {at} (the loop's Jacobian condition number one step on: {cause.cond:.3g}); "
+    if code == Status.POSITION:
+        return (f"{status_message(code)} {at} (the loop's Jacobian condition number one step on: {cause.cond:.3g}); "
                 f"a smaller h will not pass it")
-    if code == DynStatus.NOT_CONVERGED:
+    if code == Status.NOT_CONVERGED:
         return (f"an implicit step did not converge in newton_max={cause.newton_max} stage-Newton iterations with the step "
                 f"h={cause.h:.3g} s {at}: use a smaller h (or a larger newton_max)")
-    if code == DynStatus.OK:
-        return dyn_status_message(code)
-    return f"{dyn_status_message(code)} {at}"
+    if code == Status.CONVERGED:
+        return "ok: integrated to the end"
+    return f"{status_message(code)} {at}"

@@ -24,7 +24,7 @@ from ..solver.options import SolverOptions
 from .closure import close_loop
 from .forward_friction import friction_accelerations
 from .model import Model
-from .status import DynStatus
+from ..solver.status import Status
 from .virtual_power import generalized_forces, mass_matrix
 
 __all__ = ["METHODS", "Integrator", "newton_tolerance", "rhs", "coordinate_rates", "stage_residual", "Run",
@@ -161,7 +161,7 @@ def stage_residual(integ: Integrator, A, c, Z, args):
 class Run(NamedTuple):
     """What ``integrate`` returns (unpacks like the 5-tuple it replaces): the states `ys`
     ``(steps+1, n)`` and solved coordinates `qs` ``(steps+1, m)`` (NaN after a stop), the
-    run's ``DynStatus`` `status`, the time `t_stop` (s) of its last valid state, and the
+    run's ``Status`` `status`, the time `t_stop` (s) of its last valid state, and the
     simplified-Newton iterations `newton` ``(steps,)`` of each step."""
 
     ys: jax.Array
@@ -173,7 +173,7 @@ class Run(NamedTuple):
 
 class StepCarry(NamedTuple):
     """The state carried from step to step (and from chunk to chunk): the last accepted
-    state `y` and its coordinates `q`, the run's ``DynStatus`` `status` and the time
+    state `y` and its coordinates `q`, the run's ``Status`` `status` and the time
     `t_stop` (s) of its last valid state; `fresh`: whether `y` was just accepted (its
     derivative is still to be read from the next step's first Newton iteration)."""
 
@@ -285,7 +285,7 @@ def stage_newton(cx: StepContext, t, ys, qg):
 
 
 def step_status(cx: StepContext, err, pos_ok, y_new):
-    """The ``DynStatus`` of one step: the loop not closed, the stages not converged (to
+    """The ``Status`` of one step: the loop not closed, the stages not converged (to
     ``1e3`` times the tolerance), a non-finite state, an input out of the stroke, or OK;
     with joint friction, ``FRICTION`` where friction's Newton failed at a stage."""
     dof = cx.integ.model.mechanism.dof
@@ -293,12 +293,12 @@ def step_status(cx: StepContext, err, pos_ok, y_new):
     finite = jnp.all(jnp.isfinite(y_new))
     out_of_stroke = jnp.any(y_new[:dof] < cx.lo) | jnp.any(y_new[:dof] > cx.hi)
     status = jnp.where(
-        (err < 0) | ~pos_ok, DynStatus.POSITION,
-        jnp.where(~conv, DynStatus.NOT_CONVERGED,
-                  jnp.where(~finite, DynStatus.NONFINITE,
-                            jnp.where(out_of_stroke, DynStatus.STROKE_END, DynStatus.OK))))
+        (err < 0) | ~pos_ok, Status.POSITION,
+        jnp.where(~conv, Status.NOT_CONVERGED,
+                  jnp.where(~finite, Status.NONFINITE,
+                            jnp.where(out_of_stroke, Status.STROKE_END, Status.CONVERGED))))
     if cx.integ.friction is not None:  # -2: friction's Newton failed at a stage (stage_newton)
-        status = jnp.where(err == -2.0, DynStatus.FRICTION, status)
+        status = jnp.where(err == -2.0, Status.FRICTION, status)
     return status
 
 
@@ -327,8 +327,8 @@ def advance(cx: StepContext, carry: StepCarry, k):
     new_status = step_status(cx, stages.err, pos_ok, y_new)
     # A step past the ones asked for (k = n), or after a stop at an accepted state (the
     # stroke's end), only reads the rate at its start: it changes nothing.
-    counts = (status == DynStatus.OK) & (k < cx.n)
-    accept = counts & ((new_status == DynStatus.OK) | (new_status == DynStatus.STROKE_END))
+    counts = (status == Status.CONVERGED) & (k < cx.n)
+    accept = counts & ((new_status == Status.CONVERGED) | (new_status == Status.STROKE_END))
     carry = StepCarry(jnp.where(accept, y_new, y), jnp.where(accept, q_new, q),
                       jnp.where(counts, new_status, status).astype(jnp.int32), jnp.where(accept, t + cx.h, t_stop), accept)
     rows = (jnp.where(accept, y_new, jnp.nan), jnp.where(accept, q_new, jnp.nan), stages.iterations, stages.f0)
@@ -381,6 +381,6 @@ def integrate(integ: Integrator, p, t0, h, y0, q0, lo, hi) -> Run:
 
     **Returns** a ``Run``: ``(ys (steps+1, n), qs (steps+1, m), status, t_stop, newton (steps,))``.
     """
-    init = StepCarry(y0, q0, jnp.asarray(DynStatus.OK, jnp.int32), t0, jnp.asarray(True))
+    init = StepCarry(y0, q0, jnp.asarray(Status.CONVERGED, jnp.int32), t0, jnp.asarray(True))
     (_, _, status, t_stop, _), ys, qs, its, _ = integrate_chunk(integ, p, t0, h, 0.0, integ.steps, init, lo, hi)
     return Run(jnp.concatenate([y0[None], ys]), jnp.concatenate([q0[None], qs]), status, t_stop, its)

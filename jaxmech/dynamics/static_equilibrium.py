@@ -26,7 +26,6 @@ from ..solver.positions import solve_one
 from ..solver.status import Status
 from .closure import close_loop
 from .model import Model, prepare_params
-from .status import DynStatus
 from .virtual_power import generalized_forces
 from .._compile.xla import jit
 
@@ -43,7 +42,7 @@ class Equilibrium:
     - `q`: coordinates there ``(..., m)``.
     - `stiffness`: ``d(tau - tau_applied)/du`` at the equilibrium ``(..., dof, dof)``
       (N m/rad or N/m); positive (definite) means stable.
-    - `status`: ``DynStatus`` per design; `steps`: Newton iterations.
+    - `status`: ``Status`` per design; `steps`: Newton iterations.
     """
 
     u: jax.Array
@@ -112,7 +111,7 @@ class Search(NamedTuple):
 
 class EquilibriumOne(NamedTuple):
     """One design's equilibrium (``equilibrium_one``): inputs `u`, coordinates `q`, the
-    `stiffness` ``dR/du``, the ``DynStatus`` `status` and the Newton `steps`."""
+    `stiffness` ``dR/du``, the ``Status`` `status` and the Newton `steps`."""
 
     u: jax.Array
     q: jax.Array
@@ -181,7 +180,7 @@ def search_step(cx: SearchContext, st: Search) -> Search:
 
 def search_status(cx: SearchContext, st: Search):
     """``(u, status)`` after the search: one more (cheap) Newton step, which takes the
-    error from ``~step^2`` to round-off, kept inside the bracket; the ``DynStatus``
+    error from ``~step^2`` to round-off, kept inside the bracket; the ``Status``
     (no root in the range or Newton out of the box, positions failed, converged or not)."""
     k, u, q, r, j, a, b, step, ok, done, r_lo, has_root = st
     bracket = cx.model.mechanism.dof == 1
@@ -195,10 +194,10 @@ def search_status(cx: SearchContext, st: Search):
         in_box = jnp.all((u > cx.lo) & (u < cx.hi))
     u = jnp.where(conv & jnp.all(jnp.isfinite(last)), last, u)
     status = jnp.where(
-        ~has_root, DynStatus.NO_EQUILIBRIUM,
-        jnp.where(~ok, DynStatus.POSITION, jnp.where(conv, DynStatus.OK, DynStatus.NOT_CONVERGED)))
+        ~has_root, Status.NO_EQUILIBRIUM,
+        jnp.where(~ok, Status.POSITION, jnp.where(conv, Status.CONVERGED, Status.NOT_CONVERGED)))
     if not bracket:
-        status = jnp.where((status == DynStatus.NOT_CONVERGED) & ~in_box, DynStatus.NO_EQUILIBRIUM, status)
+        status = jnp.where((status == Status.NOT_CONVERGED) & ~in_box, Status.NO_EQUILIBRIUM, status)
     return u, status
 
 
@@ -220,7 +219,7 @@ def equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: in
     k = st.k - 1  # iteration 0 only evaluated the start and the ends
     u, status = search_status(cx, st)
     q, j = st.q, st.j
-    good = status == DynStatus.OK
+    good = status == Status.CONVERGED
     u_star = jnp.where(good, stop(u), jnp.nan)
     # u* attached to (p, t) by the implicit rule on R(u*(p, t), p, t) = 0: du = -R_u^{-1} R_p dp.
     u_eq = implicit_solution(functools.partial(static_residual, model, applied), u_star, good,
@@ -229,7 +228,7 @@ def equilibrium_one(model: Model, applied, options: SolverOptions, max_steps: in
     # within one quadratically small step) and attach it to (u_eq, p).
     q_eq, q_ok = close_loop(mech, u_eq, p, jnp.where(good, q, guess), 3, options)
     good = good & q_ok
-    status = jnp.where((status == DynStatus.OK) & ~q_ok, DynStatus.POSITION, status)
+    status = jnp.where((status == Status.CONVERGED) & ~q_ok, Status.POSITION, status)
     # The stiffness is the last iterate's Jacobian (one Newton step away: a diagnostic).
     return EquilibriumOne(u_eq, q_eq, jnp.where(good, j, jnp.nan), status.astype(jnp.int32), k)
 

@@ -86,7 +86,7 @@ def linkage_forward_dynamics(lk, *, h, steps: int, u0=None, u_dot0=0.0, p: Mappi
     attached to the state and parameters by the implicit function theorem, so the run
     stays differentiable in every parameter, ``mu_<key>``, ``rpin_<key>``, ``cv_<key>``
     among them (``dynamics.forward_friction``).  Where friction's Newton does not converge
-    (friction jams the linkage) the run stops with ``DynStatus.FRICTION`` and
+    (friction jams the linkage) the run stops with ``Status.FRICTION`` and
     ``Trajectory.message()`` says so.  The trajectory keeps the run's friction and its
     speed scale (``Trajectory.friction``, ``friction_speed``), so ``Trajectory.dynamics``
     applies the same law at the run's states: the effort ``tau`` with friction (the

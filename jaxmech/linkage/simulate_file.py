@@ -239,7 +239,7 @@ def simulation_columns(lk, sim: Simulation, tr, p: Mapping) -> dict:
     (A); the drive's effort on the input (``effort_<input>``, N m or N: ``n K i``, the
     constant torque, 0 in free motion); every joint's reaction (``F_<joint>_x``,
     ``F_<joint>_y``, a slider's ``M_<joint>``: ``Trajectory.dynamics``, joint friction
-    included where the run has it); ``status[-]``: 0 up to the last valid state, the run's ``DynStatus`` after."""
+    included where the run has it); ``status[-]``: 0 up to the last valid state, the run's ``Status`` after."""
     mech = lk.mechanism
     unit = {n: "m" if n in mech.lengths else "rad" for n in (*mech.inputs, *mech.coords)}
     pf = {k: float(v) for k, v in p.items()}
