@@ -47,6 +47,7 @@ from .kinematics import Samples as Samples
 from .kinematics import SmoothStart as SmoothStart
 from .kinematics import input_derivatives as input_derivatives
 from .kinematics import motion as motion
+from .kinematics import StrokeKinematics as StrokeKinematics
 from .kinematics import stroke_kinematics as stroke_kinematics
 from .kinematics import time_derivatives as time_derivatives
 from .mechanism.mechanism import Mechanism as Mechanism
@@ -115,7 +116,7 @@ __all__ = [
     "Mechanism", "Vars", "cis", "SolverOptions", "Solution", "Status", "status_counts", "status_message",
     "solve", "solve_one", "solve_stroke", "implicit_positions",
     # motion
-    "ConstantSpeed", "Ramp", "SmoothStart", "Samples", "Motion", "motion", "stroke_kinematics",
+    "ConstantSpeed", "Ramp", "SmoothStart", "Samples", "Motion", "motion", "StrokeKinematics", "stroke_kinematics",
     "input_derivatives", "time_derivatives",
     # models and dynamics
     "Model", "Body", "Gravity", "PointForce", "Moment", "Axial", "Potential", "Revolute", "Prismatic", "Slot",

@@ -25,11 +25,12 @@ from .continuation.solve import stroke
 from .solver.inputs import as_coords, as_inputs
 from .solver import implicit
 from .solver.options import SolverOptions
+from .solver.solution import Solution
 from ._compile.xla import jit
 
 __all__ = ["ConstantSpeed", "Ramp", "SmoothStart", "Samples", "drive_rates", "point_kinematics", "check_samples",
            "Motion", "input_derivatives", "one_state", "time_derivatives", "motion", "drive_samples", "split_drive",
-           "join_drive", "stroke_kinematics", "sample_kinematics", "chain_rule"]
+           "join_drive", "stroke_kinematics", "StrokeKinematics", "sample_kinematics", "chain_rule"]
 
 
 # --------------------------------------------------------------------------- drive laws
@@ -388,12 +389,27 @@ def motion(
     )
 
 
-def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions()):
+class StrokeKinematics(NamedTuple):
+    """``stroke_kinematics``'s result (a named tuple: ``sol, d1, d2 = ...`` still unpacks it).
+
+    - `solution`: the stroke's ``Solution`` (positions, per-point statuses), ``(..., N)``.
+    - `dq_du`: ``(..., N, m, dof)`` first derivatives of the coordinates with respect to the
+      inputs (rad or length per unit input), NaN where the status is not ``CONVERGED``.
+    - `d2q_du2`: ``(..., N, m, dof, dof)`` second derivatives, NaN likewise.
+    """
+
+    solution: Solution
+    dq_du: jax.Array
+    d2q_du2: jax.Array
+
+
+def stroke_kinematics(mech: Mechanism, us, p: Mapping, guess, *, options: SolverOptions = SolverOptions()) -> StrokeKinematics:
     """Positions and per-unit-input derivatives over a stroke ``us``, for one design or a
     batch of designs (``p`` leaves of shape ``(D,)``), in one compiled pass.
 
-    **Returns** ``(solution, dq_du (..., N, m, dof), d2q_du2 (..., N, m, dof, dof))``; NaN
-    where the status is not ``CONVERGED``.  The derivatives are those of ``input_derivatives``
-    (differentiable again in ``u`` and ``p``), computed together with the solve.
+    **Returns** a ``StrokeKinematics`` ``(solution, dq_du (..., N, m, dof), d2q_du2 (..., N,
+    m, dof, dof))``; NaN where the status is not ``CONVERGED``.  The derivatives are those of
+    ``input_derivatives`` (differentiable again in ``u`` and ``p``), computed together with
+    the solve.
     """
-    return stroke(mech, us, p, guess, options, derivs=True)
+    return StrokeKinematics(*stroke(mech, us, p, guess, options, derivs=True))

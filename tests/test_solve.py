@@ -294,6 +294,11 @@ def test_two_loop_sixbar_stroke_closes_and_derivatives():
     i = 300
     fd = central_diff(lambda t: jm.solve(sixbar_mechanism, t, SIXBAR_P, sol.q[i]).q, th[i], h=1e-3)
     np.testing.assert_allclose(np.asarray(d1[i, :, 0]), fd, rtol=1e-9, atol=1e-11)
+    # the named result: its second derivative against differences of the first's
+    kin = jm.stroke_kinematics(sixbar_mechanism, th[i - 1 : i + 2], SIXBAR_P, sol.q[i - 1])
+    assert isinstance(kin, jm.StrokeKinematics) and kin.solution.q.shape == (3, 4)
+    fd2 = central_diff(lambda t: jm.stroke_kinematics(sixbar_mechanism, jnp.stack([t]), SIXBAR_P, sol.q[i]).dq_du[0, :, 0], th[i], h=1e-3)
+    np.testing.assert_allclose(np.asarray(kin.d2q_du2[1, :, 0, 0]), fd2, rtol=1e-7, atol=1e-9)
 
 
 # ----------------------------------------------------------------------------- continuation and linear algebra
