@@ -182,10 +182,10 @@ def test_deprecated_names_warn_and_still_work():
 
 
 def test_newton_result_is_named():
-    from jaxmech.solver.newton import NewtonResult, newton
+    from jaxmech.solver.newton import newton
 
     res = newton(fourbar_mechanism, jm.SolverOptions(), jnp.array([0.5]), dict(a=1.0, b=3.0, c=2.5, d=3.5), jnp.array([0.4, 1.7]))
-    assert isinstance(res, NewtonResult) and int(res.status) == S.CONVERGED
+    assert isinstance(res, jm.Solution) and int(res.status) == S.CONVERGED
     a, b, c, d = 1.0, 3.0, 2.5, 3.5
     joint = a * np.exp(0.5j) + b * np.exp(1j * float(res.q[0]))
     assert abs(joint - (d + c * np.exp(1j * float(res.q[1])))) < 1e-13

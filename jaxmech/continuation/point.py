@@ -18,7 +18,8 @@ import numpy as np
 from ..mechanism.branches import branch_value, has_branch, on_branch
 from ..solver.linalg import cond1, inv_small, small_max, small_norm, solve_blocks, where
 from ..mechanism.mechanism import Mechanism
-from ..solver.newton import NewtonResult, coord_scales, evaluator, newton, per_lane
+from ..solver.newton import coord_scales, evaluator, newton, per_lane
+from ..solver.solution import Solution
 from ..solver.options import SolverOptions, tolerances
 from ..solver.status import Status
 from ..mechanism.structure import blocks
@@ -84,7 +85,7 @@ class CheckedStep(NamedTuple):
     - `q_eval`: the iterate the tests are evaluated at, always finite.
     - `q`: ``q_eval`` plus the next Newton step where ``ok`` (the reported root).
     - `ok`: every test passed (converged, conditioned, finite, on the branch).
-    - `residual`, `cond`, `branch`: at ``q_eval``, as ``newton.NewtonResult``'s.
+    - `residual`, `cond`, `branch`: at ``q_eval``, as the root record's (``newton``'s ``Solution``).
     - `steps`: Newton steps taken (int32).
     - `jac_guess`: the scaled Jacobian at the guess (what ``assemble`` reads the guess's
       assembly modes from, without evaluating it again).
@@ -220,14 +221,14 @@ class _Starts(NamedTuple):
     `score`, the start `j_best` it came from, whether the last start run `stalled`."""
 
     j: jax.Array
-    best: NewtonResult
+    best: Solution
     score: jax.Array
     j_best: jax.Array
     stalled: jax.Array
 
 
 def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, target, inputs_finite: bool = False,
-               skip=None, after_stall=None, budget=None, fold=None) -> tuple[NewtonResult, jax.Array]:
+               skip=None, after_stall=None, budget=None, fold=None) -> tuple[Solution, jax.Array]:
     """``newton.newton`` from ``starts[j]`` (``(S, m)``) with the step cap ``caps[j]``, for
     ``j = 0 .. count - 1`` (``count`` may be traced) one after another until a root on the
     requested branch (``target``) is found.  One call site of the kernel, in a
@@ -241,7 +242,7 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
     same pose reaches again).  ``fold`` (``(S,)`` bools, may be traced): start ``j`` is
     instead ``across_fold`` of the best root so far, run only where that root is on
     another branch.  ``budget``: each start's iterations (``newton.newton``'s).
-    Returns ``(best NewtonResult, index of its start)``."""
+    Returns ``(best root record (a Solution), index of its start)``."""
     dtype = starts.dtype
     last = starts.shape[0] - 1
     after = jnp.zeros((last + 1,), bool) if after_stall is None else jnp.asarray(after_stall)
@@ -266,8 +267,8 @@ def multistart(mech: Mechanism, opts: SolverOptions, u, p, starts, caps, count, 
 
     zero = jnp.zeros((), dtype)
     branch0 = branch_value(mech, starts[0], u, p) if has_branch(mech) else jnp.asarray(jnp.nan, dtype)
-    none = NewtonResult(starts[0], jnp.asarray(Status.MAX_STEPS, jnp.int32), jnp.zeros((), jnp.int32), zero, zero,
-                        branch0, jnp.zeros((), jnp.int32))
+    none = Solution(q=starts[0], status=jnp.asarray(Status.MAX_STEPS, jnp.int32), steps=jnp.zeros((), jnp.int32),
+                    residual=zero, cond=zero, branch=branch0, flipped=jnp.zeros((), jnp.int32))
     first = jnp.asarray(-1) if skip is None else where(skip, 2, -1)
     init = _Starts(jnp.zeros((), jnp.int32), none, first, jnp.zeros((), jnp.int32), jnp.asarray(False))
     out = jax.lax.while_loop(wanted, attempt, per_lane(init, jnp.all(jnp.isfinite(starts[0]))))

@@ -49,7 +49,7 @@ import jax
 import jax.numpy as jnp
 
 from ..solver.linalg import where
-from ..solver.newton import NewtonResult
+from ..solver.solution import Solution
 from ..solver.status import Status
 from .point import STARTS, fresh_starts, multistart, score, whole_turns
 from .stages import PointResults, StrokeSetup, point_derivatives
@@ -191,7 +191,7 @@ def solve_points(setup: StrokeSetup, ctx: Context, pts: PointResults, todo, mode
         # the pose after a point serves where it is near (a stretch re-entered at a toggle);
         # deeper in a gap the start before the point says as much, at half the cost
         near_r = (r_i < nb) & (r_i - idx % nb <= RIGHT_REACH)
-        res: NewtonResult = jax.vmap(one)(u_all[idx], p_, setup.b0[dsg], q_l, q_r, near_r, flat(guess)[idx], live)
+        res: Solution = jax.vmap(one)(u_all[idx], p_, setup.b0[dsg], q_l, q_r, near_r, flat(guess)[idx], live)
         take = live & (~flat(tried)[idx] | (score(res.status) > score(flat(pts_.status)[idx])))
         put = lambda x, v: flat(x).at[jnp.where(take, idx, size)].set(v.astype(x.dtype), mode="drop").reshape(x.shape)  # noqa: E731
         return pts_._replace(**{f: put(getattr(pts_, f), getattr(res, f)) for f in _FIELDS})

@@ -13,10 +13,11 @@ from ..mechanism.branches import branch_value, flipped_mask, has_branch, on_bran
 from .linalg import cond1, entries, parts, small_max, small_norm, small_tmatmul, solve_small, where
 from ..mechanism.mechanism import Mechanism
 from .options import SolverOptions, tolerances
+from .solution import Solution
 from .status import Status
 from ..mechanism.structure import blocks
 
-__all__ = ["newton", "NewtonResult", "NewtonState", "newton_iteration", "evaluator", "coord_scales", "per_lane"]
+__all__ = ["newton", "NewtonState", "newton_iteration", "evaluator", "coord_scales", "per_lane"]
 
 #: Levenberg-Marquardt damping of the kernel (scaled units).  An accepted step divides
 #: ``mu`` by ``MU_DECREASE`` (and drops it to 0, plain Newton, once it is below
@@ -77,27 +78,6 @@ def evaluator(mech: Mechanism, u, p, dtype):
 
 
 # --------------------------------------------------------------------------- the kernel
-class NewtonResult(NamedTuple):
-    """What ``newton`` found for one sample.
-
-    - `q`: the last iterate ``(m,)`` (not masked: NaN-free only where the status says so).
-    - `status`: ``Status`` code (int32).
-    - `steps`: iterations run (int32).
-    - `residual`: 2-norm of the scaled residual ``Phi / R`` at ``q``'s predecessor iterate.
-    - `cond`: 1-norm condition number of the scaled Jacobian there.
-    - `branch`: the branch indicator at ``q`` (NaN without one).
-    - `flipped`: ``Solution.flipped`` bit mask (nonzero only for ``BRANCH``).
-    """
-
-    q: jax.Array
-    status: jax.Array
-    steps: jax.Array
-    residual: jax.Array
-    cond: jax.Array
-    branch: jax.Array
-    flipped: jax.Array
-
-
 class NewtonState(NamedTuple):
     """Loop state of ``newton`` (one sample).  ``q``, ``r``, ``rn``, ``js`` belong to the best
     iterate so far; ``dz`` is the next scaled step from it."""
@@ -228,7 +208,7 @@ def newton_status(pb: NewtonProblem, st: NewtonState, inputs_ok, cond_max):
 
 
 def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_step=None, skip=None, inputs_finite: bool = False,
-           budget=None) -> NewtonResult:
+           budget=None) -> Solution:
     """Damped Newton / Levenberg-Marquardt for one sample (no gradients): the one kernel that
     serves single solves, stroke anchors and every stroke point.
 
@@ -252,7 +232,10 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     parameter is a chain of ``is-finite`` tests that XLA's CPU fusion copies into each
     consumer: for flap_msd's 29 parameters, a thousand of the stroke program's instructions.
 
-    Returns a ``NewtonResult``; its ``q`` is the last iterate (not masked).  A closed
+    Returns the root record, a ``Solution`` for one sample (without coordinate names); its
+    ``q`` is the last iterate (not masked: NaN-free only where the status says so), its
+    ``residual`` the scaled residual's 2-norm at that iterate's predecessor, its ``cond`` the
+    scaled Jacobian's 1-norm condition number there.  A closed
     residual (``<= ftol``) whose step cannot meet ``xtol`` means the Jacobian is (nearly)
     singular at an existing pose: ``SINGULAR``, whatever the units.
     """
@@ -287,4 +270,4 @@ def newton(mech: Mechanism, opts: SolverOptions, u, p, guess, target=None, max_s
     else:
         branch = jnp.asarray(jnp.nan, dtype)
         flipped = jnp.zeros((), jnp.int32)
-    return NewtonResult(q, status, jnp.maximum(st.k - 1, 0), st.rn, cond, branch, flipped)
+    return Solution(q=q, status=status, steps=jnp.maximum(st.k - 1, 0), residual=st.rn, cond=cond, branch=branch, flipped=flipped)

@@ -7,6 +7,7 @@ Strokes, solved by continuation, are in ``continuation``.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Mapping
 
@@ -38,8 +39,7 @@ def solve_one(mech: Mechanism, u, p, guess, options: SolverOptions = SolverOptio
     res = newton(mech, options, stop(u), jax.tree_util.tree_map(stop, p), stop(guess))
     ok = res.status == Status.CONVERGED
     q = implicit_positions(mech, where(ok, res.q, jnp.nan), ok, u, p)
-    return Solution(q=q, status=res.status, steps=res.steps, residual=res.residual, cond=res.cond, branch=res.branch,
-                    flipped=res.flipped, coords=mech.coords, branches=branch_names(mech))
+    return dataclasses.replace(res, q=q, coords=mech.coords, branches=branch_names(mech))
 
 
 @functools.partial(jit, static_argnums=(0, 1))
