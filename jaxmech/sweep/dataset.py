@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..solver.status import Status
+from ..solver.status import Status, status_counts
 from .evaluate import design_status
 from .kernel import ChunkData
 
@@ -111,8 +111,7 @@ class ChunkReport:
 
 
 def _counts(status: np.ndarray) -> dict:
-    codes, n = np.unique(status, return_counts=True)
-    return {Status(int(c)).name: int(k) for c, k in zip(codes, n)}
+    return status_counts(status)
 
 
 def _add_counts(into: dict, more: dict) -> dict:

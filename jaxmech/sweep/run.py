@@ -22,7 +22,7 @@ import numpy as np
 from ..scenes.base import Scene, as_scene
 from ..solver.options import SolverOptions
 from ..scenes.evaluation import SCENE_OPTIONS
-from ..solver.status import Status
+from ..solver.status import Status, status_counts
 from .dataset import (
     ROWS_PER_FILE, ROWS_PER_GROUP, ChunkReport, Dataset, DatasetWriter, manifest_of, prepare_dataset, write_manifest,
 )
@@ -404,7 +404,7 @@ def sweep_scene(
         raise RuntimeError(f"sweep_scene: every chunk failed; first error: {type(first_exc).__name__}: {first_exc}") from first_exc
     seconds = time.perf_counter() - t0
     if shown:
-        counts = {Status(int(c)).name: int(n) for c, n in zip(*np.unique(design_status(status, np), return_counts=True))}
+        counts = status_counts(design_status(status, np))
         print(summary_line(f"sweep {scene.name}", d, counts, seconds, f"{d * points} rows in memory"), file=sys.stderr)
     info = dict(chunk_size=job.chunk, n_chunks=len(starts), devices=devices, bytes_per_design=per, seconds=seconds,
                 backend="local" if client is None else "dask", outputs=job.outputs)
