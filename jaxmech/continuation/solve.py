@@ -235,9 +235,24 @@ def _per_design(passed: np.ndarray, straight, robust):
     return jax.tree_util.tree_map(pick, straight, robust)
 
 
-@jax.jit
+def _rows_on_host() -> bool:
+    """Whether a concrete stroke's arrays live in host memory (the CPU backend): its designs
+    are then gathered and scattered with numpy, which compiles nothing and costs a copy of
+    the rows (the device programs did the same work in 2-7 ms a call on 2,048 four-bar
+    designs, and compiled in 0.2 s each on a sweep's first call)."""
+    return jax.default_backend() == "cpu"
+
+
 def take_rows(tree, idx):
-    """Every leaf of ``tree`` (design axis first) at the designs ``idx``, on the device."""
+    """Every leaf of ``tree`` (design axis first, concrete) at the designs ``idx``: with
+    numpy where the arrays live on the host, else on the device."""
+    if _rows_on_host():
+        return jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], tree)
+    return _take_rows(tree, idx)
+
+
+@jax.jit
+def _take_rows(tree, idx):
     return jax.tree_util.tree_map(lambda x: jnp.take(x, idx, axis=0), tree)
 
 
@@ -254,19 +269,25 @@ def repaired_rows(straight, passed: np.ndarray, repair_rows, size: int, work: np
     the first failed one).  ``work`` (per design, optional): the failed designs go in
     ascending order of it (stable), so that designs with little to repair share a call
     instead of waiting on the phases of designs with a gap (a design's rows do not depend
-    on the others of its call).  Gathered and scattered on the device: no host copies."""
+    on the others of its call).  Gathered and scattered with numpy on the CPU backend, on
+    the device elsewhere (``take_rows``)."""
     failed = np.flatnonzero(~passed)
     if work is not None:
         failed = failed[np.argsort(np.asarray(work)[failed], kind="stable")]
     good = np.flatnonzero(passed)
-    out = straight
+    host = _rows_on_host()
+    out = jax.tree_util.tree_map(np.array, straight) if host else straight  # np.array: a writable copy
     for start in range(0, failed.size, size):
         part = failed[start : start + size]
         pad = size - part.size
         idx = np.concatenate([part, np.full(pad, good[0] if good.size else part[0])]).astype(np.int32)
-        put = np.concatenate([part, np.full(pad, passed.size)]).astype(np.int32)  # padding rows are dropped
-        out = _put_rows(out, put, repair_rows(idx))
-    return out
+        rows = repair_rows(idx)
+        if host:
+            jax.tree_util.tree_map(lambda o, r: o.__setitem__(part, np.asarray(r)[: part.size]), out, rows)
+        else:
+            put = np.concatenate([part, np.full(pad, passed.size)]).astype(np.int32)  # padding rows are dropped
+            out = _put_rows(out, put, rows)
+    return jax.device_put(out) if host else out
 
 
 def straight_then_robust(run, passed_of, repair_rows=None, size: int | None = None):
