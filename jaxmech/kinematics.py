@@ -161,23 +161,18 @@ def one_state(mech: Mechanism, q, u, **rates):
 
 
 def input_derivatives(mech: Mechanism, q, u, p):
-    """``dq/du`` and ``d2q/du2`` at one solved sample, ``q (m,)`` and ``u (dof,)`` (a number
-    for one input).
+    """``dq/du`` ``(m, dof)`` and ``d2q/du2`` ``(m, dof, dof)`` at one solved sample, ``q (m,)``
+    and ``u (dof,)`` (a number for one input); units rad (or m) per unit input.
 
-    Differentiating ``Phi(q(u), u) = 0`` once and twice along the inputs:
-
-        Phi_q q' = -Phi_u,        Phi_q q''[j, k] = -D2 Phi[x_j, x_k],  x_j = (q'_j, e_j),
-
-    so one Jacobian, one factorisation and one second directional derivative per input
-    pair serve both orders.  ``q`` is the solver's root, itself attached to ``(u, p)`` by the
-    implicit function theorem, so these are differentiable in ``u`` and ``p`` again.
-
-    Shapes ``(m, dof)`` and ``(m, dof, dof)``; units rad (or m) per unit input.  Samples
-    with NaN positions give zeros (mask them by status).
+    ``jaxmech.solver.implicit.input_derivatives`` with the sample's shapes checked: one
+    Jacobian, one factorisation and one second directional derivative per input pair serve
+    both orders (``Phi_q q' = -Phi_u``, ``Phi_q q''[j, k] = -D2 Phi[x_j, x_k]``).  ``q`` is
+    the solver's root, itself attached to ``(u, p)`` by the implicit function theorem, so
+    these are differentiable in ``u`` and ``p`` again.  Samples with NaN positions give
+    zeros (mask them by status).
     """
     q, u = one_state(mech, q, u)
-    ok = jnp.all(jnp.isfinite(q))
-    return implicit.input_derivatives(mech, jnp.where(ok, q, jnp.zeros_like(q)), u, p, ok)
+    return implicit.input_derivatives(mech, q, u, p)
 
 
 def time_derivatives(fn: Callable, t):
