@@ -166,7 +166,8 @@ def as_points(sol: Solution, d1, d2) -> PointResults:
     the values at converged points (``attach`` passes them through), zeros elsewhere."""
     ok = sol.status == Status.CONVERGED
     zero = lambda x: None if x is None else where(ok.reshape(ok.shape + (1,) * (x.ndim - ok.ndim)), x, 0.0)  # noqa: E731
-    return PointResults(zero(sol.q), sol.status, sol.steps, sol.residual, sol.cond, sol.branch, zero(d1), zero(d2))
+    return PointResults(q=zero(sol.q), status=sol.status, steps=sol.steps, residual=sol.residual, cond=sol.cond,
+                        branch=sol.branch, flipped=jnp.zeros_like(sol.status), d1=zero(d1), d2=zero(d2))
 
 
 def repair_stroke(mech, options, derivs, us, p, guess, n, walked):

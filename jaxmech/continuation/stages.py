@@ -29,6 +29,7 @@ from ..solver.implicit import input_derivatives
 from ..solver.linalg import where
 from ..mechanism.mechanism import Mechanism
 from ..solver.options import SolverOptions
+from ..solver.solution import Solution
 from ..solver.status import Status
 from .point import CHECKED_STEPS, FRESH_STEPS, checked_step, predict
 
@@ -76,19 +77,19 @@ class StrokeCarry(NamedTuple):
     lost: jax.Array
 
 
-class PointResults(NamedTuple):
-    """Per point of a block, ``(D, k, ...)``: the root `q` (the last iterate where not
-    converged), `status`, Newton `steps`, scaled `residual`, `cond`, `branch` value, and
-    (with ``derivs``) ``dq/du`` `d1` and ``d2q/du2`` `d2` (None without)."""
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class PointResults(Solution):
+    """Per point of a block (or a stroke), ``(D, k, ...)``: the root record (``Solution``'s
+    fields: the root `q`, the last iterate where not converged, `status`, Newton `steps`,
+    scaled `residual`, `cond`, `branch` value; `flipped` is zero until ``attach`` reads the
+    branch flips) and, with ``derivs``, ``dq/du`` `d1` and ``d2q/du2`` `d2` (None without)."""
 
-    q: jax.Array
-    status: jax.Array
-    steps: jax.Array
-    residual: jax.Array
-    cond: jax.Array
-    branch: jax.Array
-    d1: jax.Array | None
-    d2: jax.Array | None
+    d1: jax.Array | None = None
+    d2: jax.Array | None = None
+
+    def _replace(self, **fields) -> PointResults:
+        return dataclasses.replace(self, **fields)
 
 
 class Derivatives(NamedTuple):
@@ -181,7 +182,8 @@ def walk_block(setup: StrokeSetup, carry: StrokeCarry, xs: BlockInput):
     retry = (carry.lost >= 1) & (carry.lost <= RETRY_BLOCKS)
     chk = checked_block(setup, u_blk, g, xs.fresh | retry)
     status = where(chk.ok, Status.CONVERGED, Status.MAX_STEPS).astype(jnp.int32)
-    points = PointResults(chk.q, status, chk.steps, chk.residual, chk.cond, chk.branch, None, None)
+    points = PointResults(q=chk.q, status=status, steps=chk.steps, residual=chk.residual, cond=chk.cond, branch=chk.branch,
+                          flipped=jnp.zeros_like(status))
     # at the reported root itself, not one Newton step before it
     ders = block_derivatives(setup, points.q, u_blk, points.status == Status.CONVERGED)
     points = points._replace(d1=ders.d1, d2=ders.d2)
