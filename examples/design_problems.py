@@ -226,14 +226,13 @@ def _flap_sample(p, alpha):
     ``(q, dq/dalpha, d2q/dalpha2, ok)``, differentiable in ``p`` by the implicit rule."""
     from jaxmech.kinematics import input_derivatives
     from jaxmech.scenes.flap_msd import closed_form_positions, mechanism
-    from jaxmech.solver.positions import solve_one
-    from jaxmech.solver.status import Status
+    from jaxmech import Status, solve
 
     guess = closed_form_positions(jax.lax.stop_gradient(p), alpha)
     assembled = jnp.all(jnp.isfinite(guess))  # every dyad closes at this crank angle
     guess = jnp.where(assembled, guess, 0.0)
     u = jnp.reshape(alpha, (1,))
-    sol = solve_one(mechanism, u, p, guess)
+    sol = solve(mechanism, alpha, p, guess)  # one sample (a scalar input): works inside jit, vmap and grad
     ok = assembled & (sol.status == Status.CONVERGED)
     q = jnp.where(ok, sol.q, guess)  # mask the inputs of what follows
     d1, d2 = input_derivatives(mechanism, q, u, p)
@@ -500,8 +499,7 @@ def _arc_sample(p, s34):
     """One stroke sample by the engine's solve from the cosine-rule pose (thesis eqs.
     3.1.1-3.1.2, the flap not translated): ``(q, ok)``, differentiable by the implicit rule."""
     from jaxmech.scenes.arc_track_flap import MECHANISM
-    from jaxmech.solver.positions import solve_one
-    from jaxmech.solver.status import Status
+    from jaxmech import Status, solve
 
     a1, a2 = jax.lax.stop_gradient(p["a1"]), jax.lax.stop_gradient(p["a2"])
     s = jax.lax.stop_gradient(s34)
@@ -509,7 +507,7 @@ def _arc_sample(p, s34):
     th13 = jnp.pi - jnp.arccos((a1**2 + s**2 - a2**2) / (2 * a1 * s))
     guess = jnp.stack([th12, th13, 0.0 * th12, 0.0 * th12])
     assembled = jnp.all(jnp.isfinite(guess))
-    sol = solve_one(MECHANISM, jnp.reshape(s34, (1,)), p, jnp.where(assembled, guess, 0.0))
+    sol = solve(MECHANISM, s34, p, jnp.where(assembled, guess, 0.0))
     ok = assembled & (sol.status == Status.CONVERGED)
     return jnp.where(ok, sol.q, jnp.where(assembled, guess, 1.0)), ok
 

@@ -3,7 +3,7 @@ flap's travel and peak torque, first order (``jaxmech.design.tolerance.analyse``
 Monte Carlo (``jaxmech.design.tolerance.monte_carlo``).
 
 - ``GENERAL_FOURBAR``: a four-bar anywhere in the plane through the engine's position solve
-  (``jaxmech.solve_one``, implicit-function derivatives); ``pose`` solves one crank angle.
+  (``jaxmech.solve``, implicit-function derivatives); ``pose`` solves one crank angle.
 - ``fourbar_figures``: for ``GENERAL_FOURBAR`` at the crank angle
   ``FOURBAR_ALPHA``: the coupler point's position (``x``, ``y``, m: its path deviation
   components), the rocker angle ``theta4`` (rad) and the transmission angle (rad).
@@ -24,8 +24,7 @@ import numpy as np
 
 from jaxmech.design.tolerance import analyse, monte_carlo
 from jaxmech.mechanism import Mechanism, cis
-from jaxmech.solver.positions import solve_one
-from jaxmech.solver.status import Status
+from jaxmech import Status, solve
 
 __all__ = ["FOURBAR_DESIGNS", "FOURBAR_ALPHA", "GENERAL_FOURBAR", "PARAMS", "fourbar_figures", "flap_figures", "pose",
            "relative_tolerances", "tolerance_study"]
@@ -70,7 +69,7 @@ def pose(p, theta2):
     point ``P`` (complex, m), and whether the design assembles there (else placeholders)."""
     g = _guess(jax.lax.stop_gradient(p), theta2)
     assembled = jnp.all(jnp.isfinite(g))
-    sol = solve_one(GENERAL_FOURBAR, jnp.reshape(theta2, (1,)), p, jnp.where(assembled, g, 0.0))
+    sol = solve(GENERAL_FOURBAR, theta2, p, jnp.where(assembled, g, 0.0))
     ok = assembled & (sol.status == Status.CONVERGED)
     q = jnp.where(ok, sol.q, 0.0)
     P = GENERAL_FOURBAR.point("P", q, jnp.reshape(theta2, (1,)), p)

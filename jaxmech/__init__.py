@@ -57,7 +57,6 @@ from .solver.solution import Solution as Solution
 from .solver.options import SolverOptions as SolverOptions
 from .solver.implicit import implicit_positions as implicit_positions
 from .solver.positions import solve as solve
-from .solver.positions import solve_one as solve_one
 from .solver.status import Status as Status
 from .solver.status import status_counts as status_counts
 from .solver.status import status_message as status_message
@@ -79,6 +78,8 @@ _RENAMED = {
     "implicit_root": lambda: ("implicit_positions", implicit_positions),
     "DynStatus": _dyn_status,
     "dyn_status_message": lambda: ("status_message", status_message),
+    "solve_one": lambda: ("solve (one sample: a scalar input; it works inside jit, vmap and grad too)",
+                          __import__("jaxmech.solver.positions", fromlist=["solve_one"]).solve_one),
 }
 
 #: Names whose modules load on first use (``jaxmech.linkage``: 15 ms of the import).
@@ -114,7 +115,7 @@ except _metadata.PackageNotFoundError:  # running from a source tree
 __all__ = [
     # mechanisms and solving
     "Mechanism", "Vars", "cis", "SolverOptions", "Solution", "Status", "status_counts", "status_message",
-    "solve", "solve_one", "solve_stroke", "implicit_positions",
+    "solve", "solve_stroke", "implicit_positions",
     # motion
     "ConstantSpeed", "Ramp", "SmoothStart", "Samples", "Motion", "motion", "StrokeKinematics", "stroke_kinematics",
     "input_derivatives", "time_derivatives",

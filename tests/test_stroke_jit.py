@@ -174,6 +174,12 @@ def test_deprecated_names_warn_and_still_work():
             assert getattr(implicit, old) is getattr(implicit, new)
     with pytest.warns(DeprecationWarning, match="implicit_positions"):
         assert jm.implicit_root is jm.implicit_positions
+    with pytest.warns(DeprecationWarning, match="use jaxmech.solve "):
+        one = jm.solve_one
+    # the retired verb still answers, and as jm.solve does for one sample (the same root)
+    p = dict(a=1.0, b=3.0, c=2.5, d=3.5)
+    np.testing.assert_array_equal(np.asarray(one(fourbar_mechanism, jnp.array([0.5]), p, jnp.array([0.4, 1.7])).q),
+                                  np.asarray(jm.solve(fourbar_mechanism, 0.5, p, jnp.array([0.4, 1.7])).q))
     with pytest.warns(DeprecationWarning, match="max_iterations"):
         opts = jm.SolverOptions(max_steps=7)
     assert opts == jm.SolverOptions(max_iterations=7)
