@@ -67,17 +67,9 @@ from ._compile.xla import warn_if_wrong_jaxlib as _warn_if_wrong_jaxlib
 _warn_if_wrong_jaxlib()
 
 
-def _dyn_status():
-    from .solver.status import DYN_STATUS
-
-    return "Status (one family of result codes; compare with names, not numbers)", DYN_STATUS
-
-
 #: Deprecated names -> ``() -> (the new name, its value)``: they work one release more, with a warning.
 _RENAMED = {
     "implicit_root": lambda: ("implicit_positions", implicit_positions),
-    "DynStatus": _dyn_status,
-    "dyn_status_message": lambda: ("status_message", status_message),
     "solve_one": lambda: ("solve (one sample: a scalar input; it works inside jit, vmap and grad too)",
                           __import__("jaxmech.solver.positions", fromlist=["solve_one"]).solve_one),
 }
@@ -97,6 +89,10 @@ def __getattr__(name):
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
         globals()[name] = value
         return value
+    if name in ("DynStatus", "dyn_status_message"):  # the result codes' retired names
+        from .solver.status import retired
+
+        return retired(__name__, name)
     if name in _RENAMED:
         import warnings
 

@@ -284,7 +284,8 @@ def repaired_rows(straight, passed: np.ndarray, repair_rows, size: int, work: np
         idx = np.concatenate([part, np.full(pad, good[0] if good.size else part[0])]).astype(np.int32)
         rows = repair_rows(idx)
         if host:
-            jax.tree_util.tree_map(lambda o, r: o.__setitem__(part, np.asarray(r)[: part.size]), out, rows)
+            for o, r in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(rows)):
+                o[part] = np.asarray(r)[: part.size]  # the padding rows are left out
         else:
             put = np.concatenate([part, np.full(pad, passed.size)]).astype(np.int32)  # padding rows are dropped
             out = _put_rows(out, put, rows)

@@ -80,9 +80,7 @@ __all__ = [
 
 
 def __getattr__(name):
-    """``StopReason`` (deprecated: ``jaxmech.Status``)."""
-    if name == "StopReason":
-        from ..solver import status as _status
+    """The result codes' retired names (deprecated: ``jaxmech.Status``, ``status.RETIRED``)."""
+    from ..solver.status import retired
 
-        return _status.deprecated(__name__, name, "jaxmech.Status", _status.STOP_REASON)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return retired(__name__, name)

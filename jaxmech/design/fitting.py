@@ -275,10 +275,7 @@ def _fit_loop(objective, opt, penalty, weight, diverge, tol, xtol, steps, lo, hi
 
 
 def __getattr__(name):
-    """``StopReason`` was ``fit``'s own result codes: one family now (``jaxmech.Status``;
-    deprecated, its old member names give the new members)."""
-    from ..solver import status as _status
+    """The result codes' retired names (deprecated: ``jaxmech.Status``, ``status.RETIRED``)."""
+    from ..solver.status import retired
 
-    if name == "StopReason":
-        return _status.deprecated(__name__, name, "jaxmech.Status", _status.STOP_REASON)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return retired(__name__, name)

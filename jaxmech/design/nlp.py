@@ -115,10 +115,7 @@ def kkt_error(grad, jac, y, z, s, c, p, mu, s_max):
 
 
 def __getattr__(name):
-    """``Status`` here was the SQP's own result codes: one family now (``jaxmech.Status``;
-    deprecated, its old member names give the new members)."""
-    from ..solver import status as _status
+    """The result codes' retired names (deprecated: ``jaxmech.Status``, ``status.RETIRED``)."""
+    from ..solver.status import retired
 
-    if name == "Status":
-        return _status.deprecated(__name__, name, "jaxmech.Status", _status.SQP_STATUS)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return retired(__name__, name)

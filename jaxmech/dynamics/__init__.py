@@ -86,12 +86,7 @@ __all__ = [
 
 
 def __getattr__(name):
-    """The result codes before they were one family: ``DynStatus`` is ``jaxmech.Status``'s
-    names (deprecated), ``dyn_status_message`` is ``jaxmech.status_message``."""
-    from ..solver import status as _status
+    """The result codes' retired names (deprecated: ``jaxmech.Status``, ``status.RETIRED``)."""
+    from ..solver.status import retired
 
-    if name == "DynStatus":
-        return _status.deprecated(__name__, name, "jaxmech.Status", _status.DYN_STATUS)
-    if name == "dyn_status_message":
-        return _status.deprecated(__name__, name, "jaxmech.status_message", _status.status_message)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return retired(__name__, name)

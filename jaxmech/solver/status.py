@@ -148,10 +148,25 @@ SQP_STATUS = OldCodes("Status", {"CONVERGED": "CONVERGED", "MAX_ITERATIONS": "MA
                                  "START_NOT_EVALUATED": "INFEASIBLE", "NONFINITE": "NONFINITE"})
 
 
-def deprecated(module: str, name: str, replacement: str, value):
-    """``value``, with a DeprecationWarning that ``module.name`` is now ``replacement``."""
+#: The retired names of the codes, per module that offered them: name -> (replacement, value).
+RETIRED = {
+    "jaxmech": {"DynStatus": ("jaxmech.Status", DYN_STATUS), "dyn_status_message": ("jaxmech.status_message", status_message)},
+    "jaxmech.dynamics": {"DynStatus": ("jaxmech.Status", DYN_STATUS),
+                         "dyn_status_message": ("jaxmech.status_message", status_message)},
+    "jaxmech.design": {"StopReason": ("jaxmech.Status", STOP_REASON)},
+    "jaxmech.design.fitting": {"StopReason": ("jaxmech.Status", STOP_REASON)},
+    "jaxmech.design.nlp": {"Status": ("jaxmech.Status", SQP_STATUS)},
+}
+
+
+def retired(module: str, name: str):
+    """A module's ``__getattr__`` for the codes' retired names (``RETIRED``): the value, with a
+    DeprecationWarning naming its replacement; ``AttributeError`` for any other name."""
+    if name not in RETIRED.get(module, {}):
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
     import warnings
 
+    replacement, value = RETIRED[module][name]
     warnings.warn(f"{module}.{name} is deprecated: use {replacement} (status codes are one family now; "
                   f"compare with the names, not the numbers)", DeprecationWarning, stacklevel=3)
     return value
