@@ -4,6 +4,7 @@ import tempfile
 from pathlib import Path
 
 import jax
+import pytest
 
 # Tests run in the accuracy mode: float64.  The library itself never flips this flag.
 # (XLA_FLAGS=--xla_backend_optimization_level=0 halves compile time, but it was seen to give
@@ -28,6 +29,20 @@ jax.config.update("jax_enable_compilation_cache", False)
 # hung on futexes with asynchronous dispatch).  Set before the CPU client exists.
 jax.config.update("jax_cpu_enable_async_dispatch", False)
 os.environ.setdefault("JAXMECH_COMPILE_CACHE", os.path.join(tempfile.gettempdir(), "jaxmech-test-store"))
+
+from jaxmech._compile import room  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _room_for_compiled_code():
+    """A worker compiles hundreds of programs; each keeps its code mapped, and a process
+    whose mappings reach the kernel's limit (``vm.max_map_count``) dies in its next compile or
+    load (every suite run of 2026-11-28 lost a worker so, at 80-87% of its tests).  The
+    library releases its compiled programs before that (``room.make_room``) where it loads
+    or compiles through its store; the tests' own ``jax.jit`` programs count too, so the
+    check also runs after every test."""
+    yield
+    room.make_room()
 
 # The worked studies live in examples/ at the repository root (not in the package): make
 # ``import examples`` work from any working directory, relative to this file.

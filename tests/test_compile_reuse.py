@@ -14,6 +14,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
 
@@ -193,6 +194,40 @@ def test_a_new_process_runs_a_scenes_two_stored_programs_bit_for_bit(tmp_path, m
             np.testing.assert_array_equal(r[str(i)], np.asarray(plain[name]), err_msg=name)
 
 
+_ROOM_PROCESS = """
+import json, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+from jaxmech.scenes import get_scene, run_scene
+from jaxmech._compile import room, stored
+first = run_scene(get_scene("fourbar"), 37).table()
+stored.wait_for_stores()
+far = room.make_room(limit=10**9)
+before = room.map_count()
+released = room.make_room(limit=before)
+after = room.map_count()
+again = run_scene(get_scene("fourbar"), 37).table()
+same = all(np.array_equal(np.asarray(first[k]), np.asarray(again[k]), equal_nan=True) for k in first)
+print(json.dumps(dict(far=far, released=released, before=before, after=after, same=same, **stored.store_stats())))
+"""
+
+
+def test_compiled_code_is_released_near_the_limit_on_mappings(tmp_path):
+    """A process near the kernel's limit on memory mappings (``vm.max_map_count``) dies in
+    its next compile; ``make_room`` releases the compiled programs first: far from the
+    limit it does nothing, past ``ROOM`` of it the process's mappings drop, and the scene
+    then runs again (its programs loaded from the store) to the same table."""
+    if sys.platform != "linux":
+        pytest.skip("memory mappings are counted on Linux only")
+    env = dict(os.environ, JAXMECH_COMPILE_CACHE=str(tmp_path / "store"))
+    out = subprocess.run([sys.executable, "-c", _ROOM_PROCESS], env=env, capture_output=True, text=True, check=True)
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert not r["far"] and r["released"], r
+    assert r["after"] < r["before"] - 50, r  # a scene's compiled code maps a few hundred
+    assert r["same"] and r["loaded"] >= 2, r
+
+
 def _watt(shift=0.0, scale=1.0):
     """A Watt six-bar drawn with its joints at the given coordinates (moved by `shift` and
     scaled by `scale`: another drawing of the same topology)."""
@@ -227,8 +262,6 @@ def test_a_program_that_calls_lapack_is_not_stored():
     from jaxmech._compile import stored
 
     if stored.store_dir() is None:
-        import pytest
-
         pytest.skip("the store is switched off in this environment")
     a, b = jnp.eye(3) * 2.0, jnp.ones(3)
     assert stored.calls_lapack(jax.jit(jnp.linalg.solve).lower(a, b).compile())

@@ -43,6 +43,10 @@ The files are pickles of compiled code, like JAX's own compilation cache: load t
 from a folder you trust (your own cache folder, the default).  Within a process, a program
 serves every later call with the same key (compiled once, like the jitted function it
 stands for).
+
+Compiled code is memory the process keeps: before the store loads or compiles a program,
+``room.make_room`` releases this process's compiled programs where its memory mappings near
+the kernel's limit (a crash otherwise; see ``room``).
 """
 
 from __future__ import annotations
@@ -66,6 +70,7 @@ from jax.experimental.serialize_executable import deserialize_and_load, serializ
 
 from .cache import executables_dir
 from .quiet import quiet_loads
+from .room import make_room, on_release
 
 __all__ = ["cached_call", "cached_chain", "calls_lapack", "store_dir", "store_stats", "static_token",
            "wait_for_stores"]
@@ -76,6 +81,7 @@ __all__ = ["cached_call", "cached_chain", "calls_lapack", "store_dir", "store_st
 _STATS = {"loaded": 0, "stored": 0, "served": 0, "fallback": 0}
 # (folder, key) -> the compiled program that serves it in this process (None: use the jit path)
 _PROGRAMS: dict[tuple[str, str], object] = {}
+on_release(_PROGRAMS.clear)
 _OFF = {"0", "off", "false", "no"}
 # JAX flags that change what a traced program is
 _FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
@@ -370,6 +376,7 @@ def cached_call(fn, static: tuple, args: tuple):
     slot = (str(folder), key)  # a process may switch cache folders: each gets its own file
     fresh = None
     if slot not in _PROGRAMS:
+        make_room()
         prog = _stored_program(folder, key)
         if prog is None:
             try:
@@ -421,6 +428,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     fresh = []
     lowered = None
     if slot1 not in _PROGRAMS:
+        make_room()  # here, not between the two programs: it empties _PROGRAMS
         prog = _stored_program(folder, key1)
         if prog is not None:
             _PROGRAMS[slot1] = prog
