@@ -42,7 +42,7 @@ def _room_for_compiled_code():
     or compiles through its store; the tests' own ``jax.jit`` programs count too, so the
     check also runs after every test."""
     yield
-    room.make_room()
+    room.make_room(every=True)
 
 # The worked studies live in examples/ at the repository root (not in the package): make
 # ``import examples`` work from any working directory, relative to this file.
