@@ -26,7 +26,9 @@ jax.config.update("jax_enable_compilation_cache", False)
 # CPU programs run synchronously in the workers: with jaxlib 0.10.x, XLA work on two threads
 # at once crashed or hung (a worker segfaulted loading a stored program in the suite run of
 # 2026-11-28 with an unnamed native thread beside it; benchmarks/flap_torque.py's executables
-# hung on futexes with asynchronous dispatch).  Set before the CPU client exists.
+# hung on futexes with asynchronous dispatch).  Set before the CPU client exists.  (The
+# lost workers of 2026-11-28 turned out to be the memory-mapping limit, see the fixture
+# below; the hang is another symptom, so dispatch stays synchronous here.)
 jax.config.update("jax_cpu_enable_async_dispatch", False)
 os.environ.setdefault("JAXMECH_COMPILE_CACHE", os.path.join(tempfile.gettempdir(), "jaxmech-test-store"))
 
