@@ -61,8 +61,9 @@ from .solver.status import Status as Status
 from .solver.status import status_counts as status_counts
 from .solver.status import status_message as status_message
 
+from ._compile import stored as _stored  # noqa: F401 - installs the executable store at the programs' edge
 from ._compile.cache import enable_compile_cache as enable_compile_cache
-from ._compile.xla import warn_if_wrong_jaxlib as _warn_if_wrong_jaxlib
+from .solver.xla import warn_if_wrong_jaxlib as _warn_if_wrong_jaxlib
 
 _warn_if_wrong_jaxlib()
 

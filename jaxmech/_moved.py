@@ -40,7 +40,7 @@ MOVED = {
     "jaxmech.cli_parser": "jaxmech.cli.parser",
     "jaxmech.cli_simulate": "jaxmech.cli.simulate",
     "jaxmech.cli_values": "jaxmech.cli.values",
-    "jaxmech.xla": "jaxmech._compile.xla",
+    "jaxmech.xla": "jaxmech.solver.xla",
     "jaxmech.stored": "jaxmech._compile.stored",
     "jaxmech.cache": "jaxmech._compile.cache",
 }

@@ -26,7 +26,7 @@ from .solver.inputs import as_coords, as_inputs
 from .solver import implicit
 from .solver.options import SolverOptions
 from .solver.solution import Solution
-from ._compile.xla import jit
+from .solver.xla import jit
 
 __all__ = ["ConstantSpeed", "Ramp", "SmoothStart", "Samples", "drive_rates", "point_kinematics", "check_samples",
            "Motion", "input_derivatives", "one_state", "time_derivatives", "motion", "drive_samples", "split_drive",
@@ -313,7 +313,7 @@ def join_drive(static, leaves):
     return static if leaves is None else jax.tree_util.tree_unflatten(static, leaves)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2), stored=True)  # a new process loads it (jaxmech._compile.stored)
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def _motion_eval(mech, point_names, drive_static, drive_leaves, p, t, q, d1, d2):
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, mech.dof)

@@ -39,7 +39,7 @@ def main(argv=None) -> None:
     import jaxmech.continuation.repair as repair
     import jaxmech.continuation.solve as solve
     from benchmarks.gaps import case, watt
-    from jaxmech._compile.xla import COMPILER_OPTIONS
+    from jaxmech.solver.xla import COMPILER_OPTIONS
     from jaxmech.scenes import get_scene
     from jaxmech.solver.newton import newton
     from jaxmech.solver.options import SolverOptions

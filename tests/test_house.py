@@ -177,7 +177,7 @@ def test_the_private_name_rule_sees_what_it_should():
         [":2 uses syn._evaluator"]
     assert private_crossings("import jaxmech.design.synthesis as s\ns._x\n") == [":2 uses s._x"]
     assert private_crossings("import jaxmech\njaxmech.design._hidden\n") == [":2 uses jaxmech.design._hidden"]
-    assert private_crossings("from .._compile import xla\nxla._cache\n", package="jaxmech.design") == [":2 uses xla._cache"]
+    assert private_crossings("from ..solver import xla\nxla._cache\n", package="jaxmech.design") == [":2 uses xla._cache"]
     assert private_crossings("from .synthesis_lsq import _x\n", package="jaxmech.design") == [":1 imports _x"]
     # public names, dunders, another library's private names, a function (not a module) of jaxmech
     assert private_crossings("from jaxmech.design import synthesis as syn\nsyn.PARAMS, syn.__name__\n") == []
@@ -185,6 +185,56 @@ def test_the_private_name_rule_sees_what_it_should():
     assert private_crossings("from jaxmech.design.synthesis_lsq import evaluator\nevaluator.cache_clear()\n") == []
     assert private_crossings("from jaxmech.design import path_error as pe\npe._x\n") == []
     assert private_crossings("from ._x import y\n") == []  # a relative import outside the package: not jaxmech's
+
+
+#: The numerical layers: they compute, and never name how their programs are compiled or kept
+#: (the executable store, ``jaxmech._compile``, serves their top-level calls from the edge).
+NUMERICAL = ("solver", "mechanism", "continuation", "dynamics", "linkage", "design", "actuators",
+             "kinematics.py", "constrained.py", "tolerance.py", "units.py", "names.py")
+
+
+def _jit_call(call: ast.Call) -> bool:
+    """``jit(...)``, ``x.jit(...)`` or ``functools.partial(jit, ...)``."""
+    name = lambda n: getattr(n, "id", getattr(n, "attr", ""))  # noqa: E731
+    return name(call.func) == "jit" or (name(call.func) == "partial" and bool(call.args) and name(call.args[0]) == "jit")
+
+
+def compile_at_the_core(source: str, where: str = "", package: str = "jaxmech") -> list:
+    """Every import of ``jaxmech._compile`` (absolute or relative to `package`, the module's
+    package) and every call passing ``stored=``: compile machinery inside a numerical module."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom):
+            base = _imported_from(node, package) or ""
+            names = [f"{base}.{a.name}" for a in node.names]
+            if any(n.split(".")[:2] == ["jaxmech", "_compile"] for n in [base] + names):
+                found.append(f"{where}:{node.lineno} imports {base or node.module}")
+        elif isinstance(node, ast.Import):
+            found += [f"{where}:{node.lineno} imports {a.name}" for a in node.names if a.name.startswith("jaxmech._compile")]
+        elif isinstance(node, ast.Call) and any(k.arg == "stored" for k in node.keywords) and _jit_call(node):
+            found.append(f"{where}:{node.lineno} passes stored=")
+    return found
+
+
+def test_no_numerical_module_imports_the_compile_package():
+    files = [f for name in NUMERICAL for f in ([PACKAGE / name] if name.endswith(".py") else sorted((PACKAGE / name).rglob("*.py")))]
+    assert len(files) > 60
+    found = []
+    for f in files:
+        rel = f.relative_to(ROOT).with_suffix("")
+        found += compile_at_the_core(f.read_text(), str(f.relative_to(ROOT)), ".".join(rel.parts[:-1]))
+    assert not found, found
+
+
+def test_the_compile_rule_sees_what_it_should():
+    assert compile_at_the_core("from .._compile.stored import cached_call\n", package="jaxmech.design") == [":1 imports jaxmech._compile.stored"]
+    assert compile_at_the_core("from .. import _compile\n", package="jaxmech.design") == [":1 imports jaxmech"]
+    assert compile_at_the_core("import jaxmech._compile.cache\n") == [":1 imports jaxmech._compile.cache"]
+    assert compile_at_the_core("@functools.partial(jit, stored=True)\ndef f(x): ...\n") == [":1 passes stored="]
+    assert compile_at_the_core("f = jit(g, stored=True)\n") == [":1 passes stored="]
+    # the backend's jit; a package of another library; a physical keyword of the same name
+    assert compile_at_the_core("from ..solver.xla import jit\nfrom ._compile import x\n", package="jaxmech.design") == []
+    assert compile_at_the_core("power_balance(m, r, p, stored=names)\n") == []
 
 
 def test_no_absolute_machine_path_in_the_repository():

@@ -1,4 +1,4 @@
-"""The CPU fusion workaround (jaxmech._compile.xla.unfused) does what it is there for: fewer sine
+"""The CPU fusion workaround (jaxmech.solver.xla.unfused) does what it is there for: fewer sine
 evaluations in the compiled residual-and-Jacobian program, the same values."""
 
 import warnings
@@ -11,7 +11,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxmech as jm  # noqa: E402
-import jaxmech._compile.xla as xla  # noqa: E402
+import jaxmech.solver.xla as xla  # noqa: E402
 
 
 def _program(mech, p):
@@ -117,7 +117,7 @@ def test_a_cpu_compiler_that_refuses_the_options_compiles_with_its_defaults(tmp_
     script = (
         "import jax, numpy as np\n"
         "jax.config.update('jax_enable_x64', True)\n"
-        "import jaxmech._compile.xla as x\n"
+        "import jaxmech.solver.xla as x\n"
         "x.COMPILER_OPTIONS['xla_cpu_no_such_option_in_any_compiler'] = True\n"
         "import jaxmech as jm\n"
         "from jaxmech.scenes import run_scene\n"

@@ -1,9 +1,10 @@
 """Stored executables: a new process runs a library program without tracing, lowering or
 compiling it.
 
-The library's programs are jitted with ``xla.jit(..., stored=True)`` (the stroke, a point's
-kinematics, inverse dynamics, a scene's model batches); ``scenes.evaluation`` runs a scene's
-two programs through ``cached_chain``.  Their top-level calls (concrete arguments) come here:
+The library's programs are jitted with ``solver.xla.jit``; this module installs
+``cached_call`` as the runner of their top-level calls (``solver.xla.serve_top_level``: a
+module-level function whose static arguments lead), and ``scenes.evaluation`` runs a
+scene's two programs through ``cached_chain``.  Their top-level calls (concrete arguments) come here:
 the first process that runs a program compiles it once (``lower().compile()``, the same
 executable the jitted call would build), runs it, and stores that executable
 (``jax.experimental.serialize_executable``) before the call returns; a later process loads
@@ -68,6 +69,7 @@ import jax
 import jaxlib
 from jax.experimental.serialize_executable import deserialize_and_load, serialize
 
+from ..solver.xla import serve_top_level
 from .cache import executables_dir
 from .quiet import quiet_loads
 from .room import make_room, on_release
@@ -273,6 +275,10 @@ _LOCK = threading.Lock()  # the store's counts, read by other threads (e.g. a no
 
 
 def _store(path: Path, compiled) -> None:
+    """Store ``compiled`` at ``path`` now, on the calling thread: stores and compiles on
+    threads of their own crashed the suite's workers twice (jaxlib 0.10.2, fresh CI
+    machines), so everything XLA does for the store happens one thing at a time; the cost is
+    the serialisation (about 0.1 s for a scene's program) before the first answer returns."""
     if path.with_suffix(".unloadable").exists():  # loaded once and could not run: never again
         return
     try:
@@ -291,16 +297,6 @@ def _store(path: Path, compiled) -> None:
             _STATS["stored"] += 1
     except Exception:  # not serialisable, or a read-only cache: used in this process only
         pass
-
-
-def _store_later(path: Path, compiled) -> None:
-    """Store ``compiled`` now, on this thread.  Stores and compiles on threads of their own
-    (the answer returned first, the store written behind it; two programs compiled at once)
-    crashed the suite's workers twice with jaxlib 0.10.2 (segfaults in a persistent-cache
-    read and in a compile beside another thread's XLA work, on fresh CI machines), so
-    everything XLA does for the store happens here, one thing at a time; the cost is the
-    serialisation (about 0.1 s for a scene's program) before the first answer returns."""
-    _store(path, compiled)
 
 
 def wait_for_stores() -> None:
@@ -363,16 +359,22 @@ def _compile_lowered(lowered):
     return compiled, not served
 
 
+def _program(fn):
+    """The ``jax.jit`` function behind a library ``jit`` (``solver.xla``), ``fn`` otherwise."""
+    return fn.program() if hasattr(fn, "program") else fn
+
+
 def cached_call(fn, static: tuple, args: tuple):
     """``fn(*static, *args)`` for a ``jit`` function whose static arguments come first, by its
     stored executable where that is exactly equivalent (see the module docstring), else by
     ``fn`` itself.  The first call of a key compiles ``fn`` once, runs it, then stores it."""
+    call, fn = fn, _program(fn)  # call: the library's jit, whose traced path a trace needs
     folder = store_dir()
     if folder is None or jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
-        return fn(*static, *args)
+        return call(*static, *args)
     key = _key(fn, static, args)
     if key is None:
-        return fn(*static, *args)
+        return call(*static, *args)
     slot = (str(folder), key)  # a process may switch cache folders: each gets its own file
     fresh = None
     if slot not in _PROGRAMS:
@@ -393,7 +395,7 @@ def cached_call(fn, static: tuple, args: tuple):
             _PROGRAMS[slot] = None
         else:
             if fresh is not None:
-                _store_later(_path(folder, key), fresh)
+                _store(_path(folder, key), fresh)
             return out
     _STATS["fallback"] += 1
     return fn(*static, *args)
@@ -413,9 +415,12 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     second's)``.  ``args2``: a function of the first's outputs
     (arrays, or their ``ShapeDtypeStruct``s) giving the second's arguments.  With the store
     off, the programs are kept for this process only."""
+    call1, call2 = first, second  # the library's jits, whose traced paths a trace needs
+    first, second = _program(first), _program(second)
+
     def plain():
-        out1 = first(*static1, *args1)
-        out2 = second(*static2, *args2(out1))
+        out1 = call1(*static1, *args1)
+        out2 = call2(*static2, *args2(out1))
         return (out1, out2) if with_first else out2
 
     if jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
@@ -463,7 +468,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
         return plain()
     if folder is not None:
         for key, prog in fresh:
-            _store_later(_path(folder, key), prog)
+            _store(_path(folder, key), prog)
     return (out1, out2) if with_first else out2
 
 
@@ -488,3 +493,7 @@ def cached_json(label: str, static: tuple, compute):
     except Exception:  # a read-only cache: computed again next time
         pass
     return value
+
+
+# every later top-level call of a storable library program comes here (solver.xla)
+serve_top_level(lambda program, n_static, args: cached_call(program, args[:n_static], args[n_static:]))

@@ -25,7 +25,7 @@ from ..mechanism.mechanism import Mechanism
 from ..solver.solution import Solution
 from ..solver.status import Status
 from .stages import PointResults
-from .._compile.xla import jit
+from ..solver.xla import jit
 
 __all__ = ["Walked", "attach", "eager_attach", "EAGER_JACOBIAN_MAX"]
 
@@ -73,13 +73,13 @@ def attach(mech: Mechanism, walked: Walked, us, p):
     return sol, d1, d2
 
 
-@functools.partial(jit, static_argnums=(0, 1), stored=True)
+@functools.partial(jit, static_argnums=(0, 1))
 def _attach_program(mech, single, walked: Walked, us, p):
     res = attach(mech, walked, us, p)
     return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
 
 
-@functools.partial(jit, static_argnums=(0,), stored=True)
+@functools.partial(jit, static_argnums=(0,))
 def _attach_jacobians(mech, walked: Walked, us, p):
     """Per point of every design, the Jacobians of what ``attach`` gives (``q``, and ``dq/du``,
     ``d2q/du2`` where the walk has them) with respect to the point's input ``u`` and its

@@ -23,7 +23,7 @@ from ..solver.solution import Solution
 from ..solver.options import SolverOptions, tolerances
 from ..solver.status import Status
 from ..mechanism.structure import blocks
-from .._compile.xla import unfused
+from ..solver.xla import unfused
 
 __all__ = ["predict", "checked_step", "CheckedStep", "towards", "whole_turns", "multistart", "fresh_starts", "across_fold", "score", "STARTS", "CHECKED_STEPS", "FRESH_STEPS"]
 

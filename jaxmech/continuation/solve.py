@@ -51,7 +51,7 @@ from .point import checked_step, predict
 from .attachment import Walked, attach, eager_attach
 from .repair import failed_points, repair
 from .stages import BlockInput, PointResults, StrokeCarry, StrokeSetup, walk_block
-from .._compile.xla import jit, unfused
+from ..solver.xla import jit, unfused
 
 __all__ = ["solve_stroke", "stroke", "walk", "attach", "Walked", "repaired_rows", "take_rows", "robust_size",
            "repair_stroke", "repair_strokes", "all_converged", "predict", "bucket", "checked_step"]
@@ -153,7 +153,7 @@ def walk(mech, options, derivs, us, p, guess, n, robust: bool = True) -> Walked:
     return Walked(points, valid, setup.b0)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4), stored=True)  # a new process loads it (jaxmech._compile.stored)
+@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4))
 def _stroke_program(mech, options, derivs, single, robust, us, p, guess, n):
     """``walk`` then ``attach``: ``(Solution, d1, d2)`` with ``(D, nb)`` in front (the design
     axis dropped with ``single``; ``d1``, ``d2`` None without ``derivs``)."""
@@ -193,14 +193,14 @@ def repair_strokes(mech, us, p, guess, options, walked):
     return jax.tree_util.tree_map(lambda x: x[:, :n], out)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2), stored=True)
+@functools.partial(jit, static_argnums=(0, 1, 2))
 def _repair_program(mech, options, derivs, us, p, guess, n, walked):
     """``repair_stroke`` as a program of its own: what a concrete stroke runs for the designs
     whose walk left a point failed."""
     return repair_stroke(mech, options, derivs, us, p, guess, n, walked)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
 def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
     """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
     its inputs are then concrete once their gradients are stopped, so this program is the

@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile.xla import jit
+from ..solver.xla import jit
 
 __all__ = ["Stated", "stated_rows", "Program", "ConstrainedResult", "starts_in_box", "program", "minimize",
            "FAIL_VIOLATION"]

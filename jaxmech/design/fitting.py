@@ -14,7 +14,7 @@ import numpy as np
 import optax
 
 from ..solver.status import Status, status_message
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .figures import as_batch, figure_value
 
 __all__ = ["FitResult", "fit"]

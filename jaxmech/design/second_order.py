@@ -33,7 +33,7 @@ import numpy as np
 from .constrained import starts_in_box, stated_rows
 from ..solver.status import Status, status_message
 from .nlp import Evaluation, weighted_derivatives
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .sqp import SQPOptions, queue
 from .stroke_problem import StrokeProblem, stroke_evaluator, stroke_sizes
 
@@ -192,7 +192,7 @@ def local_optima(value, z, converged, rtol: float = 1e-7, xtol: float = 1e-5) ->
 LANES = 32
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4, 5, 6), stored=True)
+@functools.partial(jit, static_argnums=(0, 1, 2, 3, 4, 5, 6))
 def _solve_batch(problem, names: tuple, lo: tuple, hi: tuple, peak_scale: float, sizes: Epigraph, options: SQPOptions, z0, ref):
     """Every start's SQP, on ``LANES`` lanes of one vmapped loop (``sqp.queue``), from the
     scaled starts ``z0 (S, n)`` and the reference ``ref (n,)``: one program, compiled on its

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .figures import as_batch, figure_value
 
 __all__ = ["Sensitivities", "batch_jacobian", "sensitivities"]

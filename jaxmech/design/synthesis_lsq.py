@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .coupler_path import TAU, crank_interval, local_point
 
 __all__ = ["CHUNK", "Pool", "Problem", "basin_hopping", "closest_angles", "evaluator", "feasible", "polish",

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .figures import as_batch
 from .sensitivities import batch_jacobian
 

@@ -28,7 +28,7 @@ from .friction import friction_parameters
 from .forward_steps import (METHODS, Chunk, Integrator, Run, StepCarry, integrate, integrate_chunk, newton_tolerance, rhs,
                             stage_residual, coordinate_rates)
 from .model import Model, mechanism_params, prepare_params
-from .._compile.xla import jit
+from ..solver.xla import jit
 
 __all__ = ["METHODS", "CHUNK", "Trajectory", "Integrator", "newton_tolerance", "rhs", "stage_residual", "Run",
            "integrate", "integrate_chunk", "StepCarry", "Chunk", "gathered", "forward_dynamics"]

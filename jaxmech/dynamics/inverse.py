@@ -22,7 +22,7 @@ from ..kinematics import chain_rule, drive_rates, drive_samples, join_drive, poi
 from ..solver.options import SolverOptions
 from ..solver.positions import solve_one
 from ..solver.status import Status
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .friction import (JointFriction, friction_parameters, friction_reactions, friction_signs, friction_speeds, friction_status,
                        joint_speeds, stroke_signs)
 from .joints import Prismatic, Slot, joint_name
@@ -296,7 +296,7 @@ class AlongDrive(NamedTuple):
     samples: dict
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3), stored=True)  # a new process loads it (jaxmech._compile.stored)
+@functools.partial(jit, static_argnums=(0, 1, 2, 3))
 def _along(model, quasi_static, names, drive_static, drive_leaves, p, t, q, d1, d2):
     drive = join_drive(drive_static, drive_leaves)
     u, ud, udd = drive_rates(drive, t, model.mechanism.dof)

@@ -35,7 +35,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .friction import JointFriction, joint_speeds
 from .model import Axial, Model, Moment, PointForce, Potential, prepare_params
 from .virtual_power import loaded_state

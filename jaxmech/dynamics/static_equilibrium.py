@@ -27,7 +27,7 @@ from ..solver.status import Status
 from .closure import close_loop
 from .model import Model, prepare_params
 from .virtual_power import generalized_forces
-from .._compile.xla import jit
+from ..solver.xla import jit
 
 __all__ = ["Equilibrium", "equilibrium"]
 

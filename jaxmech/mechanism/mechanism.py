@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..solver.linalg import parts
-from .._compile.xla import unfused
+from ..solver.xla import unfused
 
 __all__ = ["Mechanism", "cis", "Vars", "equation_entries"]
 

@@ -30,7 +30,7 @@ from ..solver.linalg import where
 from ..solver.options import SolverOptions
 from ..solver.solution import Solution
 from ..solver.status import Status
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .outputs import merged_status, run_outputs, sample_status
 from .outputs import output_units as scene_output_units
 

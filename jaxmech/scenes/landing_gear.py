@@ -64,7 +64,7 @@ from ..solver.positions import solve
 from ..solver.solution import Solution
 from .base import Scene
 from .outputs import Outputs
-from .._compile.xla import jit
+from ..solver.xla import jit
 
 __all__ = ["SCENE", "OUTPUT_UNITS", "FT", "SPEED", "mechanism", "design", "design_family", "DEFAULTS", "PARAMETERS",
            "gear_angle", "constant_speed_motion", "linear_angle_motion", "retraction_time", "transmission_angle",

@@ -24,7 +24,7 @@ from .newton import newton
 from .options import SolverOptions
 from .solution import Solution, raise_if_failed, require_concrete
 from .status import Status
-from .._compile.xla import jit
+from .xla import jit
 
 __all__ = ["solve", "solve_one"]
 

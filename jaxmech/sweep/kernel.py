@@ -25,7 +25,7 @@ from .designs import reject
 from ..scenes.columns import mask_failed, part_columns, table_columns
 from ..scenes.evaluation import outputs_stage, repair_stage, repaired_part, scene_kinematics, scene_motion, stroke_stage
 from ..scenes.outputs import output_units, run_outputs
-from .._compile.xla import jit
+from ..solver.xla import jit
 from .evaluate import Figures, figure_names, stroke_figures
 
 __all__ = ["ChunkData", "Job", "bytes_per_design_estimate", "outputs_mode", "default_budget", "lost_chunk",
@@ -162,7 +162,7 @@ class _Staged:
         second = jit(_rest(scene, job), in_shardings=(sharding, sharding), out_shardings=sharding).lower(spec, part)
         # Compiled one after the other on this thread: compiled at once on two threads, the
         # suite's workers crashed with jaxlib 0.10.2 (segfaults beside another thread's XLA
-        # work, twice on fresh CI machines; see stored._store_later)
+        # work, twice on fresh CI machines; see stored._store)
         self.second = second.compile()
         self.first = lowered.compile()
         self.size = round_up(robust_size(job.chunk), jax.device_count())

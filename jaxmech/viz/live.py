@@ -32,7 +32,7 @@ from ..scenes.outputs import merged_status, output_units, sample_status
 from ..solver.status import Status, status_counts
 from ..sweep import design_motion
 from ..units import for_reading
-from .._compile.xla import jit
+from ..solver.xla import jit
 
 __all__ = ["live_view", "update", "sliders", "evaluate"]
 

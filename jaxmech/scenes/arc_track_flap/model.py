@@ -16,7 +16,7 @@ from ...dynamics import Body, Gravity, Model, Moment, generalized_forces
 from ...mechanism.mechanism import Mechanism, cis
 from ..base import Scene
 from ..outputs import Outputs
-from ..._compile.xla import jit
+from ...solver.xla import jit
 
 __all__ = ["SCENE", "LANDING_SCENE", "SCENARIOS", "PARAMETERS", "THESIS_INPUTS", "MECHANISM", "scene_for", "design", "geometry", "validate", "air_moment", "screw_torques", "SCREW", "MODEL", "quasi_static", "OUTPUT_UNITS"]
 
@@ -321,7 +321,7 @@ def quasi_static_one(q, u, p):
                 F34y=jnp.imag(jnp.conj(e_s) * F42), lam=lam)
 
 
-@functools.partial(jit, stored=True)  # a new process loads it (jaxmech._compile.stored)
+@jit
 def _quasi_static_batch(q, u, p):
     return jax.vmap(lambda q_, u_: quasi_static_one(q_, u_, p))(q, u)
 

@@ -13,7 +13,7 @@ import numpy as np
 from ...solver.positions import solve_one
 from ...solver.status import Status, status_message
 from ..base import run_scene
-from ..._compile.xla import jit
+from ...solver.xla import jit
 from .model import DEG, MECHANISM, MM, PARAM_NAMES, SCENARIOS, SCENE, initial_pose, quasi_static_one, scene_for, stroke_ends, validate
 
 __all__ = ["params", "forces", "accelerations", "fairing_depth", "table2", "table3"]

@@ -16,7 +16,7 @@ from ...kinematics import Motion, chain_rule
 from ...mechanism.mechanism import Mechanism, cis
 from ..base import Scene
 from ..outputs import Outputs
-from ..._compile.xla import jit
+from ...solver.xla import jit
 
 __all__ = ["SCENE", "mechanism", "DEFAULTS", "PARAMETERS", "closed_form_positions", "MODEL", "MOTOR", "loop_determinants", "torque", "torque_document", "voltage", "OUTPUT_UNITS"]
 
@@ -271,7 +271,7 @@ MODEL = Model(
 MOTOR = DCMotor(resistance="R_a", constant="K_m")
 
 
-@functools.partial(jit, stored=True)  # a new process loads it (jaxmech._compile.stored)
+@jit
 def _torque_batch(p, q, u, ud, udd, t, d1, d2):
     def one(q_, u_, ud_, udd_, t_, d1_, d2_):
         qd, qdd = chain_rule(d1_, d2_, ud_, udd_)  # this drive's rates from dq/du, d2q/du2

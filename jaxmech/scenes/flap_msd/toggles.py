@@ -12,7 +12,7 @@ import numpy as np
 
 from ...continuation.solve import solve_stroke
 from ...solver.status import Status
-from ..._compile.xla import jit
+from ...solver.xla import jit
 from .model import ALPHA_START, COORDS, DEG, SCENE, closed_form_positions, loop_determinants, mechanism
 
 __all__ = ["Toggle", "singular_positions"]

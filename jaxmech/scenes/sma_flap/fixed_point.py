@@ -10,7 +10,7 @@ from collections.abc import Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from ..._compile.xla import jit
+from ...solver.xla import jit
 from .model import circle_angle, drive_params, hinge_geometry, point_z, residual, rest_length, stiffness, wire_tensions
 
 __all__ = ["FixedPoint", "fixed_point", "fixed_point_rate", "newton_history"]

@@ -18,7 +18,7 @@ from ...solver.positions import solve
 from ...solver.solution import Solution
 from ..base import Scene
 from ..outputs import Outputs
-from ..._compile.xla import jit
+from ...solver.xla import jit
 
 __all__ = ["SCENE", "params", "parameters", "flap_mechanism", "residual", "drive_params", "SCENE_CHAIN", "stiffness", "equilibrium", "tensions", "rigid_wire_angle", "wire_force_for_angle", "EPS_RANGE", "output_units"]
 

@@ -20,21 +20,23 @@ option (jaxlib 0.11.2 on a CPU refuses it the same way) is found by a tiny progr
 compiles once: then this process compiles with the defaults (``_with_options``).  ``tests/test_xla.py`` checks that a scene's whole stroke (positions,
 statuses, derivatives and points) comes out the same either way, to rounding.
 
-``jit(..., stored=True)`` marks a program whose top-level calls (concrete arguments) go
-through the library's executable store (``jaxmech._compile.stored``): the store wraps the compiled
-program at its edge, and the function's own module never calls it.
+A top-level call of a library program (concrete arguments) is run by this process's
+*runner* where one is installed (``serve_top_level``): ``import jaxmech`` installs the
+executable store's (``jaxmech._compile.stored.cached_call``), so a new process loads a
+program instead of compiling it.  The numerical modules only ``jit`` their programs; they
+never name the store, and which programs it may keep is decided here, from their form
+(``_storable_statics``), not marked by them.
 """
 
 from __future__ import annotations
 
 import functools
+import inspect
 
 import jax
 import jax.numpy as jnp
 
-from .stored import cached_call
-
-__all__ = ["COMPILER_OPTIONS", "jit", "unfused"]
+__all__ = ["COMPILER_OPTIONS", "jit", "serve_top_level", "unfused", "warn_if_wrong_jaxlib"]
 
 #: XLA options for every program the library compiles itself (see the module docstring).
 #: A user's own ``jax.jit`` around library calls compiles with the user's options.
@@ -44,67 +46,76 @@ __all__ = ["COMPILER_OPTIONS", "jit", "unfused"]
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
-def jit(fun=None, *, stored: bool = False, **kwargs):
+def jit(fun=None, **kwargs):
     """``jax.jit`` with ``COMPILER_OPTIONS`` where JAX allows them; usable as ``@jit``,
     ``@jit(static_argnums=...)`` or ``functools.partial(jit, static_argnums=...)``.
 
     JAX takes compiler options only on a top-level ``jit``: a call with traced arguments (the
     library inside a user's ``jit``, ``vmap`` or ``grad``) runs the plain ``jax.jit``
-    function, which the enclosing program compiles with its own options.
-
-    ``stored``: a top-level call runs the stored executable where that is exactly equivalent
-    (``jaxmech._compile.stored.cached_call``); the static arguments must come first
-    (``static_argnums=(0, ..., k - 1)``) and be passed by position."""
+    function, which the enclosing program compiles with its own options.  A top-level call
+    goes to the installed runner (``serve_top_level``) where the program may be kept
+    (``_storable_statics``)."""
     if fun is None:
-        return functools.partial(jit, stored=stored, **kwargs)
-    jitted = _Jitted(jax.jit(fun, compiler_options=COMPILER_OPTIONS, **kwargs), jax.jit(fun, **kwargs))
-    if not stored:
-        return jitted
+        return functools.partial(jit, **kwargs)
+    return _Jitted(fun, jax.jit(fun, compiler_options=COMPILER_OPTIONS, **kwargs), jax.jit(fun, **kwargs),
+                   _storable_statics(fun, kwargs))
+
+
+# runner(program, n_static, args) for top-level calls of storable programs; None: call them
+_RUNNER: list = [None]
+
+
+def serve_top_level(runner) -> None:
+    """Run every later top-level call of a storable library program as ``runner(program,
+    n_static, args)``: ``program`` is the ``jax.jit`` function the call would run (with its
+    compiler options), its first ``n_static`` positional arguments are static, and
+    ``runner`` must return what ``program(*args)`` returns.  None: the programs are called
+    directly."""
+    _RUNNER[0] = runner
+
+
+def _storable_statics(fun, kwargs) -> int | None:
+    """How many leading positional arguments of ``fun`` are static, where a runner may keep
+    its compiled program by its name, static arguments and shapes; None where it may not:
+    a closure or lambda (its captured values are in no key), a method or other callable,
+    static arguments named or not leading."""
+    if not inspect.isfunction(fun) or "<" in fun.__qualname__ or "." in fun.__qualname__:
+        return None
+    if kwargs.get("static_argnames") or set(kwargs) - {"static_argnums", "donate_argnums"} or kwargs.get("donate_argnums"):
+        return None
     nums = kwargs.get("static_argnums", ())
     nums = (nums,) if isinstance(nums, int) else tuple(nums)
-    if sorted(nums) != list(range(len(nums))) or kwargs.get("static_argnames"):
-        raise ValueError(f"jit(stored=True): static arguments must come first by position, got static_argnums={nums}")
-    return _Stored(jitted, len(nums))
+    return len(nums) if sorted(nums) == list(range(len(nums))) else None
 
 
 class _Jitted:
     """A function jitted twice: with the options (top level, on a CPU) and without (inside a
     trace, or on another backend, which refuses the CPU compiler's options)."""
 
-    def __init__(self, top, nested):
-        self._top, self._nested = top, nested
-        functools.update_wrapper(self, nested)
+    def __init__(self, fun, top, nested, n_static: int | None):
+        self._top, self._nested, self._n_static = top, nested, n_static
+        functools.update_wrapper(self, fun)
+
+    def program(self):
+        """The ``jax.jit`` function a top-level call runs: with ``COMPILER_OPTIONS`` where this
+        backend's compiler takes them."""
+        return self._top if _with_options() else self._nested
 
     def __call__(self, *args, **kwargs):
-        if not _with_options() or any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
             return self._nested(*args, **kwargs)
+        program, runner = self.program(), _RUNNER[0]
         try:
-            return self._top(*args, **kwargs)
+            if runner is not None and self._n_static is not None and not kwargs:
+                return runner(program, self._n_static, args)
+            return program(*args, **kwargs)
         except ValueError as err:  # concrete arguments, but inside a trace all the same
-            if "compiler_options" not in str(err):
+            if program is self._nested or "compiler_options" not in str(err):
                 raise
             return self._nested(*args, **kwargs)
 
     def __getattr__(self, name):  # lower, trace, eval_shape...: the top-level function's
-        return getattr(self._top if _with_options() else self._nested, name)
-
-
-class _Stored:
-    """A ``_Jitted`` function whose top-level calls go through the executable store: the
-    first ``n_static`` positional arguments are its static ones."""
-
-    def __init__(self, jitted, n_static: int):
-        self._jitted, self._n_static = jitted, n_static
-        functools.update_wrapper(self, jitted)
-
-    def __call__(self, *args, **kwargs):
-        if kwargs:  # the store keys positional arguments only
-            return self._jitted(*args, **kwargs)
-        # under a trace cached_call finds a tracer in the key and calls the jitted function
-        return cached_call(self._jitted, args[: self._n_static], args[self._n_static:])
-
-    def __getattr__(self, name):
-        return getattr(self._jitted, name)
+        return getattr(self.program(), name)
 
 
 def _on_cpu() -> bool:
