@@ -197,12 +197,12 @@ def test_newton_result_is_named():
     assert abs(joint - (d + c * np.exp(1j * float(res.q[1])))) < 1e-13
 
 
-def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_one():
-    """Under an eager ``jax.grad`` the stroke's walk runs as its own (stored) program on the
-    stopped inputs, and the implicit rule's Jacobians come from another: the autodiff
-    traces only their contraction.  The values are the one program's to the last bit; the
-    gradient, a jvp and jacfwd are the jitted gradient's (to rounding: other programs) and
-    central differences' (on a stroke with a gap: NaN-free)."""
+def test_an_eager_gradient_takes_the_concrete_strokes_values_and_matches_the_jitted_one():
+    """Under an eager ``jax.grad`` the stroke's values come from the concrete call's
+    programs on the stopped inputs, and the implicit rule's Jacobians from one program more:
+    the autodiff traces only their contraction.  The values are the concrete call's to the
+    last bit; the gradient, a jvp and jacfwd are the jitted gradient's (to rounding: other
+    programs) and central differences' (on a stroke with a gap: NaN-free)."""
     from jaxmech.continuation import solve as continuation
 
     mech = fourbar_mechanism
@@ -220,13 +220,13 @@ def test_an_eager_gradient_walks_with_the_stored_program_and_matches_the_jitted_
 
     x0 = jnp.asarray([p0[k] for k in names])
     calls = []
-    walk = continuation._walk_program
+    concrete = continuation._concrete
     try:
-        continuation._walk_program = lambda *a: calls.append(1) or walk(*a)
+        continuation._concrete = lambda *a: calls.append(1) or concrete(*a)
         eager = jax.grad(figure)(x0)
     finally:
-        continuation._walk_program = walk
-    assert calls, "the eager gradient did not run the walk on its own"
+        continuation._concrete = concrete
+    assert calls, "the eager gradient did not take the concrete stroke's values"
     jitted = jax.jit(jax.grad(figure))(x0)
     assert np.all(np.isfinite(np.asarray(eager)))
     np.testing.assert_allclose(np.asarray(eager), np.asarray(jitted), rtol=1e-12, atol=1e-12)

@@ -2,10 +2,11 @@
 
 ``continuation.walk`` finds a stroke's roots and their input derivatives as values only;
 ``attach`` makes them functions of ``(us, p)`` again (``implicit.implicit_positions``,
-``implicit.implicit_input_derivatives``), inside the stroke program.  Under an eager
-autodiff (``jax.grad``, ``jvp``, ``jacfwd`` outside any ``jit``) the walk's values are
-concrete, and ``eager_attach`` takes the Jacobians of that attachment from a stored program
-as well, so the autodiff traces only their contraction with its tangents.
+``implicit.implicit_input_derivatives``, per point by ``roots``), inside the stroke program.
+Under an eager autodiff (``jax.grad``, ``jvp``, ``jacfwd`` outside any ``jit``) the stroke's
+values are a concrete stroke's (the same programs), and ``eager_attach`` takes the
+Jacobians of ``roots`` from one program more, so the autodiff traces only their contraction
+with its tangents: one implicit rule, whichever way the stroke is differentiated.
 """
 
 from __future__ import annotations
@@ -48,64 +49,77 @@ class Walked(NamedTuple):
         return self.valid & (self.points.status == Status.CONVERGED)
 
 
+def _one_point(mech, q_s, ok, e1, e2, u, p1):
+    """One point's roots attached to its input ``u`` and its design's ``p1``: ``q`` and, with
+    the walk's ``e1 = dq/du``, ``e2 = d2q/du2`` (None without), their attached values too
+    (a tuple of one or three)."""
+    q = implicit_positions(mech, q_s, ok, u, p1)
+    if e1 is None:
+        return (q,)
+    return (q,) + implicit_input_derivatives(mech, e1, e2, q_s, ok, u, p1)
+
+
+def _per_point(fn, us, *values):
+    """``fn(q_s, ok, e1, e2, u, p)`` mapped over designs and points: `values` ``(q_star, ok,
+    d1, d2)`` with ``(D, nb)`` in front (``d1``, ``d2`` may be None), ``us`` shared ``(nb,
+    dof)`` or ``(D, nb, dof)``, and ``p`` (the last of `values`) per design."""
+    *per, p = values
+    ax = None if us.ndim == 2 else 0
+    inner = tuple(None if v is None else 0 for v in per)
+    return jax.vmap(jax.vmap(fn, inner + (0, None)), inner + (ax, 0))(*per, us, p)
+
+
+def roots(mech: Mechanism, q_star, ok, d1, d2, us, p):
+    """The walk's roots ``q_star (D, nb, m)`` (NaN where not ``ok``) and derivatives ``d1``,
+    ``d2`` (None without) attached to ``(us, p)`` by the implicit function theorem:
+    ``(q, d1, d2)``, NaN where not ``ok``."""
+    out = _per_point(lambda *a: _one_point(mech, *a), where(jnp.isfinite(us), us, 0.0), q_star, ok, *_masked(ok, d1, d2), p)
+    return (out[0], None, None) if d1 is None else out
+
+
+def _masked(ok, d1, d2):
+    """``d1``, ``d2`` NaN where not ``ok`` (None stays None)."""
+    if d1 is None:
+        return None, None
+    return where(ok[..., None, None], d1, jnp.nan), where(ok[..., None, None, None], d2, jnp.nan)
+
+
 def attach(mech: Mechanism, walked: Walked, us, p):
     """``(Solution, d1, d2)``: statuses of non-finite inputs, branch flips, NaN where not
     ``CONVERGED``, and the roots (and derivatives, None without) attached to ``(us, p)``
     (the stroke as given: ``(nb, dof)`` shared or ``(D, nb, dof)``; ``p`` leaves ``(D,)``)
-    by the implicit function theorem."""
+    by the implicit function theorem (``roots``)."""
     pts = walked.points
-    u_out = where(jnp.isfinite(us), us, 0.0)
     status = where(walked.valid, pts.status, Status.NONFINITE).astype(jnp.int32)
     flipped = jax.vmap(jax.vmap(flipped_mask, (None, 0)))(walked.b0, pts.branch) if has_branch(mech) else jnp.zeros(status.shape, jnp.int32)
     flipped = where(status == Status.BRANCH, flipped, 0)
     ok = status == Status.CONVERGED
-    q_star = where(ok[..., None], pts.q, jnp.nan)
-    ax = None if us.ndim == 2 else 0
-    q = jax.vmap(jax.vmap(lambda q_, ok_, u_, p_: implicit_positions(mech, q_, ok_, u_, p_), (0, 0, 0, None)), (0, 0, ax, 0))(q_star, ok, u_out, p)
-    d1, d2 = pts.d1, pts.d2
-    if d1 is not None:
-        d1 = where(ok[..., None, None], d1, jnp.nan)
-        d2 = where(ok[..., None, None, None], d2, jnp.nan)
-        one = lambda *a: implicit_input_derivatives(mech, *a)  # noqa: E731
-        d1, d2 = jax.vmap(jax.vmap(one, (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, ax, 0))(d1, d2, q_star, ok, u_out, p)
+    q, d1, d2 = roots(mech, where(ok[..., None], pts.q, jnp.nan), ok, pts.d1, pts.d2, us, p)
     sol = Solution(q=q, status=status, steps=pts.steps, residual=pts.residual, cond=pts.cond, branch=pts.branch,
                    flipped=flipped, coords=mech.coords, branches=branch_names(mech))
     return sol, d1, d2
 
 
-@functools.partial(jit, static_argnums=(0, 1))
-def _attach_program(mech, single, walked: Walked, us, p):
-    res = attach(mech, walked, us, p)
-    return jax.tree_util.tree_map(lambda x: x[0], res) if single else res
+@functools.partial(jit, static_argnums=(0,))
+def _roots_program(mech, q_star, ok, d1, d2, us, p):
+    """``roots`` as a program: what an eager autodiff traces where the Jacobians would be too
+    large to hold (``eager_attach``)."""
+    return roots(mech, q_star, ok, d1, d2, us, p)
 
 
 @functools.partial(jit, static_argnums=(0,))
-def _attach_jacobians(mech, walked: Walked, us, p):
-    """Per point of every design, the Jacobians of what ``attach`` gives (``q``, and ``dq/du``,
+def _attach_jacobians(mech, q_star, ok, d1, d2, us, p):
+    """Per point of every design, the Jacobians of what ``roots`` gives (``q``, and ``dq/du``,
     ``d2q/du2`` where the walk has them) with respect to the point's input ``u`` and its
     design's parameters ``p``: a tuple over those outputs of ``(J_u (D, nb, *out, dof),
-    {name: J_p (D, nb, *out)})``, by forward mode through ``attach``'s implicit rules (zero
-    where a point failed).  What an eager derivative of a stroke contracts its tangents with."""
-    pts = walked.points
-    ok = walked.converged
-    q_star = where(ok[..., None], pts.q, jnp.nan)
-    u_out = where(jnp.isfinite(us), us, 0.0)
-    derivs = pts.d1 is not None
-    d1 = pts.d1 if derivs else jnp.zeros(q_star.shape + (us.shape[-1],), q_star.dtype)
-    d2 = pts.d2 if derivs else jnp.zeros(d1.shape + (us.shape[-1],), q_star.dtype)
+    {name: J_p (D, nb, *out)})``, by forward mode through the implicit rules (zero where a
+    point failed).  What an eager derivative of a stroke contracts its tangents with."""
 
     def one(q_s, ok_, e1, e2, u, p1):
-        def outputs(u_, p_):
-            q = implicit_positions(mech, q_s, ok_, u_, p_)
-            if not derivs:
-                return (q,)
-            return (q,) + implicit_input_derivatives(mech, where(ok_, e1, jnp.nan), where(ok_, e2, jnp.nan), q_s, ok_, u_, p_)
-
-        jac = jax.jacfwd(outputs, argnums=(0, 1))(u, p1)
+        jac = jax.jacfwd(lambda u_, p_: _one_point(mech, q_s, ok_, e1, e2, u_, p_), argnums=(0, 1))(u, p1)
         return tuple(jax.tree_util.tree_map(lambda x: where(ok_, x, 0.0), j) for j in jac)
 
-    ax = None if us.ndim == 2 else 0
-    return jax.vmap(jax.vmap(one, (0, 0, 0, 0, 0, None)), (0, 0, 0, 0, ax, 0))(q_star, ok, d1, d2, u_out, p)
+    return _per_point(one, where(jnp.isfinite(us), us, 0.0), q_star, ok, *_masked(ok, d1, d2), p)
 
 
 def _contract(jac, ok, t_u, t_p):
@@ -139,33 +153,41 @@ def _zero_tangent(x):
     return np.zeros(jnp.shape(x), jax.dtypes.float0)
 
 
-def eager_attach(mech, single: bool, walked: Walked, us, p):
-    """``attach`` of a concrete walk to a ``(us, p)`` an eager autodiff traces (``jax.grad``,
-    ``jvp``, ``jacfwd`` outside any ``jit``): values and Jacobians come from stored programs
-    (a new process loads them), and the autodiff traces only their contraction with the
-    tangents, a few products and sums.  Where those Jacobians would be large (more than
-    ``EAGER_JACOBIAN_MAX`` numbers: many designs, points and parameters), the autodiff
-    traces ``attach`` itself instead, as inside a ``jit``."""
-    d, nb, m = walked.points.q.shape
+def eager_attach(mech, single: bool, values, us, p):
+    """A concrete stroke's ``values`` (``(Solution, d1, d2)``, as the concrete call returns
+    them) attached to a ``(us, p)`` that an eager autodiff traces (``jax.grad``, ``jvp``,
+    ``jacfwd`` outside any ``jit``): the values are returned as they are, and their tangents
+    are the implicit rule's Jacobians (one program, ``_attach_jacobians``) contracted with
+    the autodiff's tangents, a few products and sums.  Where those Jacobians would be large
+    (more than ``EAGER_JACOBIAN_MAX`` numbers: many designs, points and parameters), the
+    autodiff traces ``roots`` itself instead (``_roots_program``), as inside a ``jit``."""
+    lead = (lambda x: None if x is None else np.asarray(x)[None]) if single else (lambda x: None if x is None else np.asarray(x))  # noqa: E731
+    sol, d1, d2 = values
+    ok = np.asarray(sol.status)[None] == Status.CONVERGED if single else np.asarray(sol.status) == Status.CONVERGED
+    q_star, e1, e2 = lead(sol.q), lead(d1), lead(d2)
+    d, nb, m = q_star.shape
     dof = us.shape[-1]
-    per_point = m * (1 + dof + dof * dof if walked.points.d1 is not None else 1)
+    per_point = m * (1 + dof + dof * dof if d1 is not None else 1)
+    drop = (lambda x: None if x is None else x[0]) if single else (lambda x: x)  # noqa: E731
+
+    def with_roots(new):
+        q, n1, n2 = (drop(x) for x in new)
+        return dataclasses.replace(sol, q=q), n1, n2
+
     if d * nb * per_point * (dof + len(p)) > EAGER_JACOBIAN_MAX:
-        return _attach_program(mech, single, walked, us, p)
+        return with_roots(_roots_program(mech, q_star, ok, e1, e2, us, p))
 
     @jax.custom_jvp
     def attached(us_, p_):
-        return _attach_program(mech, single, walked, us_, p_)
+        return values
 
     @attached.defjvp
     def attached_jvp(primals, tangents):
-        us_, p_ = primals  # concrete in an eager autodiff: the stored programs serve them
+        us_, p_ = primals  # concrete in an eager autodiff: the stored program serves them
         t_us, t_p = tangents
-        out = _attach_program(mech, single, walked, us_, p_)
-        jac = _attach_jacobians(mech, walked, us_, p_)
-        ok = np.asarray(walked.converged)
+        jac = _attach_jacobians(mech, q_star, ok, e1, e2, us_, p_)
         t_out = _tangents(single, jac, ok, us_, t_us, t_p)
-        sol, d1, d2 = out
         t_sol = dataclasses.replace(jax.tree_util.tree_map(_zero_tangent, sol), q=t_out[0])
-        return out, (t_sol, *(t_out[1:] if d1 is not None else (None, None)))
+        return values, (t_sol, *(t_out[1:] if d1 is not None else (None, None)))
 
     return attached(us, p)

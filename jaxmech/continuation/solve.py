@@ -24,7 +24,10 @@ the walk's program for every design and the repair's program only for the design
 failed point (``straight_then_robust``: gathered into batches of ``robust_size`` designs),
 from the walk's own results: a design's answer never depends on the others of its batch,
 and the smooth case compiles and runs the walk alone.  ``run_scene`` and the sweep kernels
-follow the same rule per design, so a sweep and ``run_scene`` give the same bits.
+follow the same rule per design, so a sweep and ``run_scene`` give the same bits.  An eager
+autodiff (``jax.grad``, ``jvp``, ``jacfwd`` outside any ``jit``) takes the values of that
+concrete call, bit for bit, and their tangents from the implicit rule's Jacobians
+(``attachment.eager_attach``): it traces a few products, not the stroke.
 
 Compiled shapes are bucketed: a stroke is padded (repeating its last input) to the next of
 a few sizes per octave, so 361 and 362 points share one compiled program.
@@ -200,14 +203,6 @@ def _repair_program(mech, options, derivs, us, p, guess, n, walked):
     return repair_stroke(mech, options, derivs, us, p, guess, n, walked)
 
 
-@functools.partial(jit, static_argnums=(0, 1, 2, 3))
-def _walk_program(mech, options, derivs, robust, us, p, guess, n) -> Walked:
-    """``walk`` alone, for a stroke differentiated eagerly (``jax.grad`` outside any ``jit``):
-    its inputs are then concrete once their gradients are stopped, so this program is the
-    stored one (``attachment.eager_attach`` attaches its result)."""
-    return walk(mech, options, derivs, us, p, guess, n, robust)
-
-
 # --------------------------------------------------------------------------- concrete strokes
 def all_converged(status) -> np.ndarray:
     """Per design (``()`` for one), whether every sample of ``status (..., N)`` converged."""
@@ -354,11 +349,9 @@ def stroke(mech: Mechanism, us, p: Mapping, guess, options: SolverOptions, deriv
     elif not traced:
         out = _concrete(mech, options, derivs, single, per_design, us_, pf, gf, n_)
     elif not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(stopped)):
-        # differentiated eagerly: the walk (values only) runs as a stored program, and the
-        # autodiff traces only the implicit rule's attachment
-        walked = straight_then_robust(lambda r: _walk_program(mech, options, derivs, r, *stopped, n_),
-                                      lambda w: np.all(np.asarray(w.converged)[:, : n], axis=-1))  # fmt: skip
-        out = eager_attach(mech, single, walked, us_, pf)
+        # differentiated eagerly: the values are the concrete stroke's (its programs), and
+        # the autodiff traces only the implicit rule's Jacobians contracted with its tangents
+        out = eager_attach(mech, single, _concrete(mech, options, derivs, single, per_design, *stopped, n_), us_, pf)
     else:
         out = _stroke_program(mech, options, derivs, single, True, us_, pf, gf, n_)
     if nb > n:
