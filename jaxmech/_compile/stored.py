@@ -359,22 +359,22 @@ def _compile_lowered(lowered):
     return compiled, not served
 
 
-def _program(fn):
-    """The ``jax.jit`` function behind a library ``jit`` (``solver.xla``), ``fn`` otherwise."""
-    return fn.program() if hasattr(fn, "program") else fn
+def _direct(fn):
+    """``fn`` called without the store: a library ``jit``'s ``direct`` (``solver.xla``: never
+    through the runner, which would bring the call back here), ``fn`` itself otherwise."""
+    return fn.direct if hasattr(fn, "direct") else fn
 
 
 def cached_call(fn, static: tuple, args: tuple):
     """``fn(*static, *args)`` for a ``jit`` function whose static arguments come first, by its
     stored executable where that is exactly equivalent (see the module docstring), else by
     ``fn`` itself.  The first call of a key compiles ``fn`` once, runs it, then stores it."""
-    call, fn = fn, _program(fn)  # call: the library's jit, whose traced path a trace needs
     folder = store_dir()
     if folder is None or jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
-        return call(*static, *args)
+        return _direct(fn)(*static, *args)
     key = _key(fn, static, args)
     if key is None:
-        return call(*static, *args)
+        return _direct(fn)(*static, *args)
     slot = (str(folder), key)  # a process may switch cache folders: each gets its own file
     fresh = None
     if slot not in _PROGRAMS:
@@ -398,7 +398,7 @@ def cached_call(fn, static: tuple, args: tuple):
                 _store(_path(folder, key), fresh)
             return out
     _STATS["fallback"] += 1
-    return fn(*static, *args)
+    return _direct(fn)(*static, *args)
 
 
 def _shapes(tree):
@@ -415,12 +415,9 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     second's)``.  ``args2``: a function of the first's outputs
     (arrays, or their ``ShapeDtypeStruct``s) giving the second's arguments.  With the store
     off, the programs are kept for this process only."""
-    call1, call2 = first, second  # the library's jits, whose traced paths a trace needs
-    first, second = _program(first), _program(second)
-
     def plain():
-        out1 = call1(*static1, *args1)
-        out2 = call2(*static2, *args2(out1))
+        out1 = _direct(first)(*static1, *args1)
+        out2 = _direct(second)(*static2, *args2(out1))
         return (out1, out2) if with_first else out2
 
     if jax.config.jax_disable_jit or jax.config.jax_debug_nans or jax.config.jax_debug_infs:
@@ -459,7 +456,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
                 fresh.append((key1, prog))
     try:
         out1 = _run(folder, key1, _PROGRAMS[slot1], args1)
-        out2 = second(*static2, *args2(out1)) if key2 is None else _run(folder, key2, _PROGRAMS[slot2], args2(out1))
+        out2 = _direct(second)(*static2, *args2(out1)) if key2 is None else _run(folder, key2, _PROGRAMS[slot2], args2(out1))
     except Exception:  # a loaded executable this runtime cannot run (``_run``): the jit path
         _PROGRAMS.pop(slot1, None)
         if key2 is not None:
@@ -496,4 +493,4 @@ def cached_json(label: str, static: tuple, compute):
 
 
 # every later top-level call of a storable library program comes here (solver.xla)
-serve_top_level(lambda program, n_static, args: cached_call(program, args[:n_static], args[n_static:]))
+serve_top_level(lambda fn, n_static, args: cached_call(fn, args[:n_static], args[n_static:]))

@@ -66,11 +66,12 @@ _RUNNER: list = [None]
 
 
 def serve_top_level(runner) -> None:
-    """Run every later top-level call of a storable library program as ``runner(program,
-    n_static, args)``: ``program`` is the ``jax.jit`` function the call would run (with its
-    compiler options), its first ``n_static`` positional arguments are static, and
-    ``runner`` must return what ``program(*args)`` returns.  None: the programs are called
-    directly."""
+    """Run every later top-level call of a storable library program as ``runner(fn,
+    n_static, args)``: ``fn`` is the library's jitted function (``fn.program()`` the
+    ``jax.jit`` function the call would compile, with its compiler options; ``fn.direct``
+    calls it without the runner), its first ``n_static`` positional arguments are static,
+    and ``runner`` must return what ``fn.direct(*args)`` returns.  None: the programs are
+    called directly."""
     _RUNNER[0] = runner
 
 
@@ -102,12 +103,20 @@ class _Jitted:
         return self._top if _with_options() else self._nested
 
     def __call__(self, *args, **kwargs):
-        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+        runner = _RUNNER[0]
+        if runner is not None and self._n_static is not None and not kwargs and not _traced(args):
+            # the runner resolves the program only where it compiles: a warm call that loads
+            # a stored executable never probes the compiler (``_accepted``, a compile of its own)
+            return runner(self, self._n_static, args)
+        return self.direct(*args, **kwargs)
+
+    def direct(self, *args, **kwargs):
+        """The call without the runner: the program itself (``program``), or the plain
+        ``jax.jit`` function inside a trace."""
+        if _traced((args, kwargs)):
             return self._nested(*args, **kwargs)
-        program, runner = self.program(), _RUNNER[0]
+        program = self.program()
         try:
-            if runner is not None and self._n_static is not None and not kwargs:
-                return runner(program, self._n_static, args)
             return program(*args, **kwargs)
         except ValueError as err:  # concrete arguments, but inside a trace all the same
             if program is self._nested or "compiler_options" not in str(err):
@@ -116,6 +125,10 @@ class _Jitted:
 
     def __getattr__(self, name):  # lower, trace, eval_shape...: the top-level function's
         return getattr(self.program(), name)
+
+
+def _traced(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 def _on_cpu() -> bool:
