@@ -155,3 +155,38 @@ def test_a_jaxlib_that_computes_wrong_values_is_warned_at_import(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         xla.warn_if_wrong_jaxlib()
+
+
+def _module_level(k, x):
+    return x * k
+
+
+def test_the_store_serves_module_level_programs_only_and_gives_their_values(monkeypatch):
+    """The runner (the executable store, installed by ``import jaxmech``) is handed a
+    program's top-level call only where a key can determine it: a module-level function
+    whose static arguments lead.  A closure (its captured value is in no key), static
+    arguments that do not lead or are named, and traced calls go straight to JAX; every
+    route gives the function's own value."""
+    assert xla._RUNNER[0] is not None  # import jaxmech installed the store
+    handed = []
+
+    def runner(fn, n_static, args):
+        handed.append((fn.__name__, n_static))
+        return fn.direct(*args)
+
+    monkeypatch.setattr(xla, "_RUNNER", [runner])
+    scale = 3.0
+    closure = xla.jit(lambda x: x * scale)
+    leading = xla.jit(_module_level, static_argnums=(0,))
+    trailing = xla.jit(lambda x, k: x * k, static_argnums=(1,))
+    named = xla.jit(_module_level, static_argnames=("k",))
+    x = jnp.arange(3.0)
+    np.testing.assert_allclose(np.asarray(closure(x)), 3.0 * np.arange(3.0))
+    np.testing.assert_allclose(np.asarray(trailing(x, 2)), 2.0 * np.arange(3.0))
+    np.testing.assert_allclose(np.asarray(named(k=4, x=x)), 4.0 * np.arange(3.0))
+    assert handed == []
+    np.testing.assert_allclose(np.asarray(leading(5, x)), 5.0 * np.arange(3.0))
+    assert handed == [("_module_level", 1)]
+    np.testing.assert_allclose(np.asarray(jax.jit(lambda y: leading(5, y))(x)), 5.0 * np.arange(3.0))  # traced
+    np.testing.assert_allclose(float(jax.grad(lambda y: leading(5, y).sum())(x)[0]), 5.0)
+    assert handed == [("_module_level", 1)]
