@@ -63,6 +63,7 @@ import platform
 import tempfile
 import threading
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import jax
@@ -275,10 +276,8 @@ _LOCK = threading.Lock()  # the store's counts, read by other threads (e.g. a no
 
 
 def _store(path: Path, compiled) -> None:
-    """Store ``compiled`` at ``path`` now, on the calling thread: stores and compiles on
-    threads of their own crashed the suite's workers twice (jaxlib 0.10.2, fresh CI
-    machines), so everything XLA does for the store happens one thing at a time; the cost is
-    the serialisation (about 0.1 s for a scene's program) before the first answer returns."""
+    """Store ``compiled`` at ``path``, on the calling thread (about 0.1 s for a scene's
+    program, before the first answer returns)."""
     if path.with_suffix(".unloadable").exists():  # loaded once and could not run: never again
         return
     try:
@@ -300,8 +299,7 @@ def _store(path: Path, compiled) -> None:
 
 
 def wait_for_stores() -> None:
-    """Nothing to wait for: every store is written before the call that compiled it returns
-    (kept for scripts that call it before starting a process that should find them)."""
+    """Nothing to wait for: every store is written before the call that compiled it returns."""
 
 
 # An executable that JAX loaded from its own persistent cache must not be stored again:
@@ -401,8 +399,7 @@ def cached_call(fn, static: tuple, args: tuple):
     return _direct(fn)(*static, *args)
 
 
-def _shapes(tree):
-    """``tree``'s arrays (or shapes) as plain ``ShapeDtypeStruct``s."""
+def _shapes(tree):  # arrays (or shapes) as plain ShapeDtypeStructs
     return jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), tree)
 
 
@@ -410,8 +407,10 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     """``second(*static2, *args2(first(*static1, *args1)))`` for two ``jit`` functions whose
     static arguments come first: two programs, each run by its stored executable where that
     is exactly equivalent (as ``cached_call``).  Where they must be compiled, both are
-    lowered first (the second from the first's output shapes), then compiled one after the
-    other on this thread.  ``with_first``: returns ``(first's outputs,
+    lowered first (the second from the first's output shapes), then compiled at once: XLA
+    compiles the first on a thread of its own (it releases the GIL) while this thread
+    compiles the second (a scene's stroke, then its kinematics and outputs: two cores do
+    both in about the time of the longer).  ``with_first``: returns ``(first's outputs,
     second's)``.  ``args2``: a function of the first's outputs
     (arrays, or their ``ShapeDtypeStruct``s) giving the second's arguments.  With the store
     off, the programs are kept for this process only."""
@@ -428,7 +427,7 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
     folder = store_dir()
     slot1 = (str(folder), key1)
     fresh = []
-    lowered = None
+    lowered = pending = None
     if slot1 not in _PROGRAMS:
         make_room()  # here, not between the two programs: it empties _PROGRAMS
         prog = _stored_program(folder, key1)
@@ -436,24 +435,28 @@ def cached_chain(first, static1: tuple, args1: tuple, second, static2: tuple, ar
             _PROGRAMS[slot1] = prog
         else:
             lowered = first.lower(*static1, *args1)
-    try:
-        info = (_PROGRAMS[slot1] if lowered is None else lowered).out_info
-        shapes2 = args2(_shapes(info))
-        key2 = _key(second, static2, shapes2)
-        slot2 = (str(folder), key2)
-        if key2 is not None and slot2 not in _PROGRAMS:
-            prog = _stored_program(folder, key2)
-            if prog is None:
-                prog, storable = _compile(second, static2, shapes2)
+    with ThreadPoolExecutor(1, thread_name_prefix="jaxmech-compile") as pool:
+        try:
+            info = (_PROGRAMS[slot1] if lowered is None else lowered).out_info
+            shapes2 = args2(_shapes(info))
+            key2 = _key(second, static2, shapes2)
+            slot2 = (str(folder), key2)
+            if key2 is not None and slot2 not in _PROGRAMS:
+                prog = _stored_program(folder, key2)
+                if prog is None:
+                    # both lowered before either compiles: only XLA's compiles run at once
+                    lowered2 = second.lower(*static2, *shapes2)
+                    pending = pool.submit(_compile_lowered, lowered) if lowered is not None else None
+                    prog, storable = _compile_lowered(lowered2)
+                    if storable:
+                        fresh.append((key2, prog))
+                _PROGRAMS[slot2] = prog
+        finally:
+            if lowered is not None:  # registered even where the second failed to trace
+                prog, storable = pending.result() if pending is not None else _compile_lowered(lowered)
+                _PROGRAMS[slot1] = prog
                 if storable:
-                    fresh.append((key2, prog))
-            _PROGRAMS[slot2] = prog
-    finally:
-        if lowered is not None:  # registered even where the second failed to trace
-            prog, storable = _compile_lowered(lowered)
-            _PROGRAMS[slot1] = prog
-            if storable:
-                fresh.append((key1, prog))
+                    fresh.append((key1, prog))
     try:
         out1 = _run(folder, key1, _PROGRAMS[slot1], args1)
         out2 = _direct(second)(*static2, *args2(out1)) if key2 is None else _run(folder, key2, _PROGRAMS[slot2], args2(out1))
