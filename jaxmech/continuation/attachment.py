@@ -59,29 +59,25 @@ def _one_point(mech, q_s, ok, e1, e2, u, p1):
     return (q,) + implicit_input_derivatives(mech, e1, e2, q_s, ok, u, p1)
 
 
-def _per_point(fn, us, *values):
-    """``fn(q_s, ok, e1, e2, u, p)`` mapped over designs and points: `values` ``(q_star, ok,
-    d1, d2)`` with ``(D, nb)`` in front (``d1``, ``d2`` may be None), ``us`` shared ``(nb,
-    dof)`` or ``(D, nb, dof)``, and ``p`` (the last of `values`) per design."""
-    *per, p = values
+def _per_point(fn, q_star, ok, d1, d2, us, p):
+    """``fn(q_s, ok, e1, e2, u, p)`` mapped over designs and points: ``q_star``, ``ok``, ``d1``,
+    ``d2`` with ``(D, nb)`` in front (``d1``, ``d2`` None without, NaN where not ``ok``), the
+    inputs ``us`` shared ``(nb, dof)`` or ``(D, nb, dof)`` (non-finite ones as 0), ``p`` per
+    design."""
+    if d1 is not None:
+        d1 = where(ok[..., None, None], d1, jnp.nan)
+        d2 = where(ok[..., None, None, None], d2, jnp.nan)
     ax = None if us.ndim == 2 else 0
-    inner = tuple(None if v is None else 0 for v in per)
-    return jax.vmap(jax.vmap(fn, inner + (0, None)), inner + (ax, 0))(*per, us, p)
+    inner = (0, 0) + ((None, None) if d1 is None else (0, 0))
+    return jax.vmap(jax.vmap(fn, inner + (0, None)), inner + (ax, 0))(q_star, ok, d1, d2, where(jnp.isfinite(us), us, 0.0), p)
 
 
 def roots(mech: Mechanism, q_star, ok, d1, d2, us, p):
     """The walk's roots ``q_star (D, nb, m)`` (NaN where not ``ok``) and derivatives ``d1``,
     ``d2`` (None without) attached to ``(us, p)`` by the implicit function theorem:
     ``(q, d1, d2)``, NaN where not ``ok``."""
-    out = _per_point(lambda *a: _one_point(mech, *a), where(jnp.isfinite(us), us, 0.0), q_star, ok, *_masked(ok, d1, d2), p)
+    out = _per_point(lambda *a: _one_point(mech, *a), q_star, ok, d1, d2, us, p)
     return (out[0], None, None) if d1 is None else out
-
-
-def _masked(ok, d1, d2):
-    """``d1``, ``d2`` NaN where not ``ok`` (None stays None)."""
-    if d1 is None:
-        return None, None
-    return where(ok[..., None, None], d1, jnp.nan), where(ok[..., None, None, None], d2, jnp.nan)
 
 
 def attach(mech: Mechanism, walked: Walked, us, p):
@@ -119,7 +115,7 @@ def _attach_jacobians(mech, q_star, ok, d1, d2, us, p):
         jac = jax.jacfwd(lambda u_, p_: _one_point(mech, q_s, ok_, e1, e2, u_, p_), argnums=(0, 1))(u, p1)
         return tuple(jax.tree_util.tree_map(lambda x: where(ok_, x, 0.0), j) for j in jac)
 
-    return _per_point(one, where(jnp.isfinite(us), us, 0.0), q_star, ok, *_masked(ok, d1, d2), p)
+    return _per_point(one, q_star, ok, d1, d2, us, p)
 
 
 def _contract(jac, ok, t_u, t_p):
@@ -161,9 +157,11 @@ def eager_attach(mech, single: bool, values, us, p):
     the autodiff's tangents, a few products and sums.  Where those Jacobians would be large
     (more than ``EAGER_JACOBIAN_MAX`` numbers: many designs, points and parameters), the
     autodiff traces ``roots`` itself instead (``_roots_program``), as inside a ``jit``."""
-    lead = (lambda x: None if x is None else np.asarray(x)[None]) if single else (lambda x: None if x is None else np.asarray(x))  # noqa: E731
+    def lead(x):  # (D, nb, ...) in front: a single design's values get its axis back
+        return None if x is None else np.asarray(x)[None] if single else np.asarray(x)
+
     sol, d1, d2 = values
-    ok = np.asarray(sol.status)[None] == Status.CONVERGED if single else np.asarray(sol.status) == Status.CONVERGED
+    ok = lead(sol.status) == Status.CONVERGED
     q_star, e1, e2 = lead(sol.q), lead(d1), lead(d2)
     d, nb, m = q_star.shape
     dof = us.shape[-1]

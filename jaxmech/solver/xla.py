@@ -61,7 +61,7 @@ def jit(fun=None, **kwargs):
                    _storable_statics(fun, kwargs))
 
 
-# runner(program, n_static, args) for top-level calls of storable programs; None: call them
+# runner(fn, n_static, args) for top-level calls of storable programs (serve_top_level); None: call them
 _RUNNER: list = [None]
 
 
@@ -82,7 +82,7 @@ def _storable_statics(fun, kwargs) -> int | None:
     static arguments named or not leading."""
     if not inspect.isfunction(fun) or "<" in fun.__qualname__ or "." in fun.__qualname__:
         return None
-    if kwargs.get("static_argnames") or set(kwargs) - {"static_argnums", "donate_argnums"} or kwargs.get("donate_argnums"):
+    if set(kwargs) - {"static_argnums"}:  # named statics, donations, shardings: not keyed
         return None
     nums = kwargs.get("static_argnums", ())
     nums = (nums,) if isinstance(nums, int) else tuple(nums)
@@ -103,18 +103,23 @@ class _Jitted:
         return self._top if _with_options() else self._nested
 
     def __call__(self, *args, **kwargs):
+        if _traced((args, kwargs)):
+            return self._nested(*args, **kwargs)
         runner = _RUNNER[0]
-        if runner is not None and self._n_static is not None and not kwargs and not _traced(args):
+        if runner is not None and self._n_static is not None and not kwargs:
             # the runner resolves the program only where it compiles: a warm call that loads
             # a stored executable never probes the compiler (``_accepted``, a compile of its own)
             return runner(self, self._n_static, args)
-        return self.direct(*args, **kwargs)
+        return self._concrete(*args, **kwargs)
 
     def direct(self, *args, **kwargs):
         """The call without the runner: the program itself (``program``), or the plain
         ``jax.jit`` function inside a trace."""
         if _traced((args, kwargs)):
             return self._nested(*args, **kwargs)
+        return self._concrete(*args, **kwargs)
+
+    def _concrete(self, *args, **kwargs):
         program = self.program()
         try:
             return program(*args, **kwargs)
